@@ -1,0 +1,45 @@
+//! Camera perturbations: the contract, and one module per family.
+//!
+//! A camera perturbation is built once for a (severity, seed, [`ImageGeometry`]): that is when it
+//! computes its kernels, tables, textures and particle sets. It is then applied to each frame with
+//! the frame's sequence number; the output is a pure function of (input, perturbation, severity,
+//! seed, sequence number). Implementations write every byte of every output row (alpha is copied).
+//!
+//! Work inside `apply` is split into row bands with [`ops::par_rows`]; the number of threads is the
+//! caller's rayon pool, and the result is the same whatever that number is.
+
+pub mod blur;
+pub mod color;
+pub mod noise;
+pub mod ops;
+
+use crate::error::Result;
+use crate::image::{ImageGeometry, ImageView, ImageViewMut};
+
+/// What a camera perturbation is configured with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CameraSetup {
+    /// Severity, 1..=5 (already validated).
+    pub severity: u8,
+    /// Seed of every random draw.
+    pub seed: u64,
+    /// The frames it will be applied to.
+    pub geometry: ImageGeometry,
+}
+
+impl CameraSetup {
+    /// Index 0..=4 into a five-level severity table.
+    pub fn level(&self) -> usize {
+        (self.severity.clamp(1, 5) - 1) as usize
+    }
+}
+
+/// A configured camera perturbation.
+pub trait CameraPerturbation: Send + Sync {
+    /// Writes the perturbed `input` into `output`. Both have the geometry given at configuration
+    /// (checked by the caller); strides may differ.
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64);
+}
+
+/// A camera constructor as stored in the registry.
+pub type CameraBuilder = fn(&CameraSetup) -> Result<Box<dyn CameraPerturbation>>;

@@ -1,0 +1,24 @@
+//! # perturb-core
+//!
+//! The perturbation library of the sensor-degradation middleware: camera and LiDAR perturbations
+//! over borrowed sensor buffers, the catalogue that lists them, the sensor models, and decoders and
+//! encoders for the file and message formats the project reads. It does no IPC and no networking:
+//! the same code runs on a shared-memory sample in the daemon, on a decoded file in the CLI and on a
+//! message of a recorded bag.
+//!
+//! Start with [`perturber::CameraPerturber`] / [`perturber::LidarPerturber`] and
+//! [`registry::CATALOGUE`].
+
+#![warn(missing_docs)]
+
+pub mod camera;
+pub mod cloud;
+pub mod error;
+pub mod image;
+pub mod lidar;
+pub mod perturber;
+pub mod registry;
+pub mod rng;
+pub mod sensors;
+
+pub use error::{Error, Result};

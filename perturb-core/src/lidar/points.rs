@@ -1,0 +1,348 @@
+//! Reading the fields a perturbation needs out of any layout, and writing the result back into it.
+
+use crate::cloud::{CloudView, FieldReader, names};
+use crate::error::{Error, Result};
+use crate::sensors::SensorModel;
+use rayon::prelude::*;
+
+/// The fields of a cloud as flat arrays (structure of arrays), in point order.
+#[derive(Clone, Debug, Default)]
+pub struct Points {
+    /// x in metres.
+    pub x: Vec<f32>,
+    /// y in metres.
+    pub y: Vec<f32>,
+    /// z in metres.
+    pub z: Vec<f32>,
+    /// Intensity in the cloud's own units (see `intensity_max`), if the layout has one.
+    pub intensity: Option<Vec<f32>>,
+    /// Full-scale intensity of the sensor model: 1.0 or 255.0.
+    pub intensity_max: f32,
+    /// Ring per point, read from the layout or derived from elevation.
+    pub ring: Option<Vec<u16>>,
+    /// True if `ring` was derived from elevation rather than read.
+    pub ring_derived: bool,
+}
+
+impl Points {
+    /// Extracts x, y, z, the intensity and (when `want_ring`) the ring from `cloud`. Fails with a
+    /// clear error if the layout has no float x, y, z.
+    pub fn extract(cloud: &CloudView<'_>, sensor: &SensorModel, want_ring: bool) -> Result<Self> {
+        let mut p = Points::default();
+        p.fill(cloud, sensor, want_ring)?;
+        Ok(p)
+    }
+
+    /// Like [`Points::extract`], reusing this value's allocations.
+    pub fn fill(
+        &mut self,
+        cloud: &CloudView<'_>,
+        sensor: &SensorModel,
+        want_ring: bool,
+    ) -> Result<()> {
+        let layout = cloud.layout();
+        let [rx, ry, rz] = layout.xyz_readers()?;
+        let n = cloud.len();
+        let read = |r: FieldReader, dst: &mut Vec<f32>| {
+            dst.clear();
+            dst.extend((0..n).map(|i| r.read_f32(cloud.point(i))));
+        };
+        read(rx, &mut self.x);
+        read(ry, &mut self.y);
+        read(rz, &mut self.z);
+        self.intensity_max = sensor.intensity_max;
+        match layout.reader_any(names::INTENSITY) {
+            Some(ri) => {
+                let mut v = self.intensity.take().unwrap_or_default();
+                read(ri, &mut v);
+                self.intensity = Some(v);
+            }
+            None => self.intensity = None,
+        }
+        self.ring_derived = false;
+        self.ring = None;
+        if want_ring {
+            let mut ring = Vec::with_capacity(n);
+            if let Some(rr) = layout.reader_any(names::RING) {
+                ring.extend((0..n).map(|i| rr.read_f64(cloud.point(i)).clamp(0.0, 65535.0) as u16));
+            } else {
+                ring.extend((0..n).map(|i| {
+                    let (x, y, z) = (self.x[i], self.y[i], self.z[i]);
+                    sensor.ring_of_elevation(z.atan2((x * x + y * y).sqrt()))
+                }));
+                self.ring_derived = true;
+            }
+            self.ring = Some(ring);
+        }
+        Ok(())
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// True if there are no points.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Position of point `i`.
+    #[inline]
+    pub fn xyz(&self, i: usize) -> [f32; 3] {
+        [self.x[i], self.y[i], self.z[i]]
+    }
+
+    /// Euclidean range of point `i` from the sensor origin.
+    #[inline]
+    pub fn range(&self, i: usize) -> f32 {
+        (self.x[i] * self.x[i] + self.y[i] * self.y[i] + self.z[i] * self.z[i]).sqrt()
+    }
+
+    /// Intensity of point `i` in the cloud's units (0 if the cloud has none).
+    #[inline]
+    pub fn intensity(&self, i: usize) -> f32 {
+        self.intensity.as_ref().map_or(0.0, |v| v[i])
+    }
+}
+
+/// Flag: the output point has a new position.
+pub const MOVED: u8 = 1;
+/// Flag: the output point has a new intensity.
+pub const NEW_INTENSITY: u8 = 2;
+
+/// The output of a LiDAR perturbation, one entry per output point: the input point it is made
+/// from (all its other fields are copied), and the new position and intensity where flagged.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Plan {
+    /// Source point index per output point.
+    pub src: Vec<u32>,
+    /// New position (valid where `flags & MOVED`).
+    pub xyz: Vec<[f32; 3]>,
+    /// New intensity in the cloud's units (valid where `flags & NEW_INTENSITY`).
+    pub intensity: Vec<f32>,
+    /// [`MOVED`] | [`NEW_INTENSITY`].
+    pub flags: Vec<u8>,
+}
+
+/// Shape of a written cloud.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CloudShape {
+    /// Points per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Bytes per row.
+    pub row_step: usize,
+    /// Bytes written.
+    pub bytes: usize,
+}
+
+impl Plan {
+    /// Empties the plan, keeping its allocations.
+    pub fn clear(&mut self) {
+        self.src.clear();
+        self.xyz.clear();
+        self.intensity.clear();
+        self.flags.clear();
+    }
+
+    /// Output points so far.
+    pub fn len(&self) -> usize {
+        self.src.len()
+    }
+
+    /// True if the plan has no points.
+    pub fn is_empty(&self) -> bool {
+        self.src.is_empty()
+    }
+
+    /// Keeps input point `i` unchanged.
+    #[inline]
+    pub fn keep(&mut self, i: usize) {
+        self.push(i, [0.0; 3], 0.0, 0);
+    }
+
+    /// Keeps input point `i` at a new position.
+    #[inline]
+    pub fn moved(&mut self, i: usize, xyz: [f32; 3]) {
+        self.push(i, xyz, 0.0, MOVED);
+    }
+
+    /// Keeps input point `i` with a new intensity.
+    #[inline]
+    pub fn dimmed(&mut self, i: usize, intensity: f32) {
+        self.push(i, [0.0; 3], intensity, NEW_INTENSITY);
+    }
+
+    /// Emits a point made from input point `i` with a new position and intensity (a moved point, a
+    /// scattering return, a ghost copy).
+    #[inline]
+    pub fn emit(&mut self, i: usize, xyz: [f32; 3], intensity: f32) {
+        self.push(i, xyz, intensity, MOVED | NEW_INTENSITY);
+    }
+
+    /// Appends an entry with explicit flags.
+    #[inline]
+    pub fn push(&mut self, i: usize, xyz: [f32; 3], intensity: f32, flags: u8) {
+        self.src.push(i as u32);
+        self.xyz.push(xyz);
+        self.intensity.push(intensity);
+        self.flags.push(flags);
+    }
+
+    /// Keeps every input point unchanged.
+    pub fn keep_all(&mut self, n: usize) {
+        for i in 0..n {
+            self.keep(i);
+        }
+    }
+
+    /// True if the plan has exactly the input points in input order (so an organised cloud can keep
+    /// its height and width).
+    pub fn is_one_to_one(&self, n: usize) -> bool {
+        self.src.len() == n && self.src.iter().enumerate().all(|(k, &s)| s as usize == k)
+    }
+
+    /// Bytes the output needs for `input`'s layout.
+    pub fn output_bytes(&self, input: &CloudView<'_>) -> usize {
+        self.len() * input.layout().point_step as usize
+    }
+
+    /// Writes the output cloud into `out` in `input`'s layout: each output point is a copy of its
+    /// source point's bytes with x, y, z and the intensity field overwritten where flagged. An
+    /// organised input (height > 1) keeps its height and width when the plan is one to one;
+    /// otherwise the output is one row.
+    pub fn write(&self, input: &CloudView<'_>, out: &mut [u8]) -> Result<CloudShape> {
+        let layout = input.layout();
+        let step = layout.point_step as usize;
+        let needed = self.output_bytes(input);
+        if out.len() < needed {
+            return Err(Error::OutputTooSmall {
+                needed,
+                available: out.len(),
+            });
+        }
+        let [rx, ry, rz] = layout.xyz_readers()?;
+        let ri = layout.reader_any(names::INTENSITY);
+        if step > 0 {
+            out[..needed]
+                .par_chunks_mut(step * 1024)
+                .enumerate()
+                .for_each(|(block, chunk)| {
+                    for (j, dst) in chunk.chunks_exact_mut(step).enumerate() {
+                        let k = block * 1024 + j;
+                        dst.copy_from_slice(input.point(self.src[k] as usize));
+                        let f = self.flags[k];
+                        if f & MOVED != 0 {
+                            let p = self.xyz[k];
+                            rx.write_f32(dst, p[0]);
+                            ry.write_f32(dst, p[1]);
+                            rz.write_f32(dst, p[2]);
+                        }
+                        if f & NEW_INTENSITY != 0
+                            && let Some(ri) = ri
+                        {
+                            ri.write_f32(dst, self.intensity[k]);
+                        }
+                    }
+                });
+        }
+        let (width, height) = if input.height > 1 && self.is_one_to_one(input.len()) {
+            (input.width, input.height)
+        } else {
+            (self.len() as u32, 1)
+        };
+        Ok(CloudShape {
+            width,
+            height,
+            row_step: width as usize * step,
+            bytes: needed,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cloud::{Cloud, Datatype, PointField, PointLayout};
+    use std::sync::Arc;
+
+    fn odd_layout() -> PointLayout {
+        PointLayout::new(
+            vec![
+                PointField::new("intensity", 0, Datatype::Uint8),
+                PointField::new("x", 1, Datatype::Float32),
+                PointField::new("y", 5, Datatype::Float32),
+                PointField::new("z", 9, Datatype::Float64),
+                PointField::new("ring", 17, Datatype::Uint16),
+                PointField::new("time", 19, Datatype::Float32),
+            ],
+            26,
+            true,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn extract_and_write_round_trip_in_an_odd_layout() {
+        let layout = odd_layout();
+        let cloud = Cloud::from_xyzi(&layout, &[[1.0, 2.0, 3.0, 40.0], [4.0, 5.0, 6.0, 250.0]]);
+        let t = layout.reader("time").unwrap();
+        let mut cloud = cloud;
+        t.write_f32(&mut cloud.data[26..], 0.05);
+        let view = cloud.view();
+        let pts = Points::extract(&view, &SensorModel::vlp32c(), true).unwrap();
+        assert_eq!(pts.xyz(1), [4.0, 5.0, 6.0]);
+        assert_eq!(pts.intensity(1), 250.0);
+        assert!(!pts.ring_derived);
+
+        let mut plan = Plan::default();
+        plan.keep(1);
+        plan.emit(0, [7.0, 8.0, 9.0], 12.0);
+        let mut out = vec![0u8; plan.output_bytes(&view)];
+        let shape = plan.write(&view, &mut out).unwrap();
+        assert_eq!((shape.width, shape.height), (2, 1));
+        assert_eq!(
+            &out[..26],
+            &cloud.data[26..52],
+            "kept point is byte-identical"
+        );
+        let outv =
+            crate::cloud::CloudView::new(Arc::new(layout.clone()), &out, 2, 1, 52, true).unwrap();
+        let back = Points::extract(&outv, &SensorModel::vlp32c(), false).unwrap();
+        assert_eq!(back.xyz(1), [7.0, 8.0, 9.0]);
+        assert_eq!(back.intensity(1), 12.0);
+        assert_eq!(
+            t.read_f32(outv.point(0)),
+            0.05,
+            "untouched fields pass through"
+        );
+    }
+
+    #[test]
+    fn ring_is_derived_from_elevation_when_absent() {
+        let layout = PointLayout::xyzi_f32();
+        let d = 10.0f32;
+        let low = (-25.0f32).to_radians().tan() * d;
+        let cloud = Cloud::from_xyzi(&layout, &[[d, 0.0, low, 0.0], [d, 0.0, 0.0, 0.0]]);
+        let pts = Points::extract(&cloud.view(), &SensorModel::vlp32c(), true).unwrap();
+        assert!(pts.ring_derived);
+        assert_eq!(pts.ring.unwrap(), vec![0, 20]);
+    }
+
+    #[test]
+    fn write_refuses_a_short_buffer() {
+        let cloud = Cloud::from_xyzi(&PointLayout::xyzi_f32(), &[[1.0, 1.0, 1.0, 1.0]]);
+        let mut plan = Plan::default();
+        plan.keep_all(1);
+        let err = plan.write(&cloud.view(), &mut [0u8; 8]).unwrap_err();
+        assert!(matches!(
+            err,
+            Error::OutputTooSmall {
+                needed: 16,
+                available: 8
+            }
+        ));
+    }
+}
