@@ -463,6 +463,42 @@ pub fn luma(r: u8, g: u8, b: u8) -> u8 {
     ((r as u32 * 19595 + g as u32 * 38470 + b as u32 * 7471 + 32768) >> 16) as u8
 }
 
+/// Bilinear resize (pixel centres aligned, as OpenCV's INTER_LINEAR), any format; alpha is
+/// resampled like the colour channels. Used to bring real frames to benchmark sizes.
+pub fn resize_bilinear(src: &ImageView<'_>, width: u32, height: u32) -> Image {
+    let mut out = Image::new(width, height, src.format);
+    if src.width == 0 || src.height == 0 || width == 0 || height == 0 {
+        return out;
+    }
+    let c = src.format.channels();
+    let sx = src.width as f32 / width as f32;
+    let sy = src.height as f32 / height as f32;
+    let xmap: Vec<(usize, usize, f32)> = (0..width)
+        .map(|x| {
+            let fx = ((x as f32 + 0.5) * sx - 0.5).max(0.0);
+            let x0 = (fx as usize).min(src.width as usize - 1);
+            let x1 = (x0 + 1).min(src.width as usize - 1);
+            (x0, x1, fx - x0 as f32)
+        })
+        .collect();
+    let stride = out.stride;
+    for (y, row) in out.data.chunks_exact_mut(stride).enumerate() {
+        let fy = ((y as f32 + 0.5) * sy - 0.5).max(0.0);
+        let y0 = (fy as usize).min(src.height as usize - 1);
+        let y1 = (y0 + 1).min(src.height as usize - 1);
+        let wy = fy - y0 as f32;
+        let (r0, r1) = (src.row(y0), src.row(y1));
+        for (x, &(x0, x1, wx)) in xmap.iter().enumerate() {
+            for ch in 0..c {
+                let a = r0[x0 * c + ch] as f32 * (1.0 - wx) + r0[x1 * c + ch] as f32 * wx;
+                let b = r1[x0 * c + ch] as f32 * (1.0 - wx) + r1[x1 * c + ch] as f32 * wx;
+                row[x * c + ch] = (a * (1.0 - wy) + b * wy + 0.5) as u8;
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

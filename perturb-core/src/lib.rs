@@ -13,7 +13,9 @@
 
 pub mod camera;
 pub mod cloud;
+pub mod detector;
 pub mod error;
+pub mod formats;
 pub mod image;
 pub mod lidar;
 pub mod perturber;

@@ -282,7 +282,7 @@ pub enum Perturber {
     /// A camera perturbation.
     Camera(CameraPerturber),
     /// A LiDAR perturbation.
-    Lidar(LidarPerturber),
+    Lidar(Box<LidarPerturber>),
 }
 
 impl Perturber {
@@ -291,7 +291,7 @@ impl Perturber {
         let spec = Spec::new(id, severity, seed)?;
         Ok(match spec.entry.modality {
             Modality::Camera => Perturber::Camera(CameraPerturber::from_spec(spec)?),
-            Modality::Lidar => Perturber::Lidar(LidarPerturber::from_spec(spec, sensor)?),
+            Modality::Lidar => Perturber::Lidar(Box::new(LidarPerturber::from_spec(spec, sensor)?)),
         })
     }
 }

@@ -10,8 +10,11 @@
 
 pub mod blur;
 pub mod color;
+pub mod distortion;
 pub mod noise;
 pub mod ops;
+pub mod pattern;
+pub mod weather;
 
 use crate::error::Result;
 use crate::image::{ImageGeometry, ImageView, ImageViewMut};

@@ -9,9 +9,13 @@
 //! driver adds) passes through byte for byte, whatever the point_step, offsets or byte order.
 //! Output is a pure function of (input, perturbation, severity, seed, sequence number).
 
+pub mod affine;
+pub mod local;
+pub mod motion;
 pub mod noise;
 pub mod points;
 pub mod sensor;
+pub mod weather;
 
 pub use points::{Plan, Points};
 

@@ -1,0 +1,1 @@
+//! Distortion family (C-D): geometric and sharpness changes.

@@ -1,0 +1,1 @@
+//! Pattern family (C-E): graphic occlusions drawn over the image.

@@ -1,0 +1,1 @@
+//! The LiDAR clustering detector (Autoware Mini style): ground removal, voxel downsampling, DBSCAN, box fitting.

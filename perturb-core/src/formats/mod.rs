@@ -1,0 +1,81 @@
+//! Decoders and encoders for the file and message formats the project reads and writes.
+//!
+//! Everything here works on bytes in memory; reading and writing files is the caller's job, and
+//! the caller adds the file name to the error. Malformed input returns [`crate::Error::Malformed`]
+//! saying what is wrong and where, never a panic.
+//!
+//! | format | module |
+//! |---|---|
+//! | PNG, JPEG | [`picture`] |
+//! | KITTI velodyne `.bin` (float32 x, y, z, reflectance) | [`kitti`] |
+//! | nuScenes `.pcd.bin` (float32 x, y, z, intensity, ring) | [`kitti`] |
+//! | PCD v0.7 (ascii, binary, binary_compressed; any fields) | [`pcd`] |
+//! | `sensor_msgs/Image`, `CompressedImage`, `PointCloud2` in CDR | [`ros`] |
+
+pub mod kitti;
+pub mod pcd;
+pub mod picture;
+pub mod ros;
+
+use crate::error::{Error, Result};
+
+/// The file formats recognised by extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FileKind {
+    /// `.png`
+    Png,
+    /// `.jpg` / `.jpeg`
+    Jpeg,
+    /// KITTI `.bin`
+    KittiBin,
+    /// nuScenes `.pcd.bin`
+    NuscenesBin,
+    /// `.pcd`
+    Pcd,
+    /// A rosbag2 MCAP file (handled by the bag crate).
+    Mcap,
+}
+
+impl FileKind {
+    /// The kind of a file from its name, or a clear error naming the extension.
+    pub fn from_path(path: &std::path::Path) -> Result<Self> {
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default()
+            .to_ascii_lowercase();
+        Ok(if name.ends_with(".pcd.bin") {
+            FileKind::NuscenesBin
+        } else if name.ends_with(".bin") {
+            FileKind::KittiBin
+        } else if name.ends_with(".pcd") {
+            FileKind::Pcd
+        } else if name.ends_with(".png") {
+            FileKind::Png
+        } else if name.ends_with(".jpg") || name.ends_with(".jpeg") {
+            FileKind::Jpeg
+        } else if name.ends_with(".mcap") {
+            FileKind::Mcap
+        } else {
+            return Err(Error::InvalidConfig {
+                reason: format!(
+                    "cannot tell the format of `{}` from its extension (known: .png .jpg .jpeg .bin .pcd.bin .pcd .mcap)",
+                    path.display()
+                ),
+            });
+        })
+    }
+
+    /// True for the image formats.
+    pub fn is_image(self) -> bool {
+        matches!(self, FileKind::Png | FileKind::Jpeg)
+    }
+
+    /// True for the point-cloud formats.
+    pub fn is_cloud(self) -> bool {
+        matches!(
+            self,
+            FileKind::KittiBin | FileKind::NuscenesBin | FileKind::Pcd
+        )
+    }
+}

@@ -1,0 +1,1 @@
+//! Affine family (L-E): shear, scale and rotation of the points inside object boxes.

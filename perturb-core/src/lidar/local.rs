@@ -1,0 +1,1 @@
+//! Local family (L-D): corruptions of the points inside object boxes.

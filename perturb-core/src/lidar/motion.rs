@@ -1,0 +1,1 @@
+//! Motion and alignment family (L-F): ego-motion blur, moving objects, ghost points, misalignment.

@@ -1,0 +1,1 @@
+//! Weather family (L-A): snow, rain, fog and sunlight, physics-based and lightweight.

@@ -1,0 +1,160 @@
+//! Properties every implemented camera perturbation must have, at every severity: determinism,
+//! geometry and format preserved, alpha untouched, stride independence, thread-count independence,
+//! tiny images, and a visible change on a real street frame.
+
+mod common;
+
+use perturb_core::error::Error;
+use perturb_core::image::{Image, ImageView, PixelFormat, resize_bilinear};
+use perturb_core::perturber::CameraPerturber;
+use perturb_core::registry::{Modality, of_modality};
+
+fn implemented() -> Vec<&'static perturb_core::registry::Entry> {
+    of_modality(Modality::Camera)
+        .filter(|e| e.is_implemented())
+        .collect()
+}
+
+/// A deterministic synthetic street-like frame: sky gradient, grey road, a few coloured blocks.
+fn synthetic(w: u32, h: u32, format: PixelFormat) -> Image {
+    let mut img = Image::new(w, h, PixelFormat::Rgb8);
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let p = &mut img.data[(y * w as usize + x) * 3..][..3];
+            let (fy, fx) = (y as f32 / h.max(1) as f32, x as f32 / w.max(1) as f32);
+            let (r, g, b) = if fy < 0.45 {
+                (90.0 + 80.0 * fy, 140.0 + 60.0 * fy, 220.0)
+            } else {
+                (100.0 + 20.0 * fx, 100.0, 105.0)
+            };
+            let block = ((x / 17 + y / 11) % 5 == 0) as u8 as f32;
+            p[0] = (r + 90.0 * block * fx) as u8;
+            p[1] = (g - 40.0 * block) as u8;
+            p[2] = (b - 60.0 * block * fy) as u8;
+        }
+    }
+    img.convert(format)
+}
+
+fn with_stride(img: &Image, pad: usize) -> Image {
+    let stride = img.stride + pad;
+    let mut data = vec![0xAB; stride * img.height as usize];
+    for y in 0..img.height as usize {
+        data[y * stride..y * stride + img.stride]
+            .copy_from_slice(&img.data[y * img.stride..][..img.stride]);
+    }
+    Image::from_vec(data, img.width, img.height, stride, img.format).unwrap()
+}
+
+fn run(p: &mut CameraPerturber, input: &ImageView<'_>, seq: u64) -> Result<Image, Error> {
+    p.apply_owned(input, seq)
+}
+
+fn mean_abs_diff(a: &Image, b: &Image) -> f64 {
+    let n = a.data.len().max(1);
+    a.data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (*x as f64 - *y as f64).abs())
+        .sum::<f64>()
+        / n as f64
+}
+
+#[test]
+fn deterministic_and_stride_and_thread_independent() {
+    let input = synthetic(97, 61, PixelFormat::Rgb8);
+    let padded = with_stride(&input, 5);
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let two = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    for e in implemented() {
+        for s in e.severities() {
+            let mut p = CameraPerturber::new(e.id, s, 1234).unwrap();
+            let a = one.install(|| run(&mut p, &input.view(), 9)).unwrap();
+            let b = two.install(|| run(&mut p, &input.view(), 9)).unwrap();
+            assert_eq!(a, b, "{} s{s}: output depends on the thread count", e.id);
+            let c = run(&mut p, &padded.view(), 9).unwrap();
+            assert_eq!(a, c, "{} s{s}: output depends on the input stride", e.id);
+            let mut fresh = CameraPerturber::new(e.id, s, 1234).unwrap();
+            assert_eq!(
+                a,
+                run(&mut fresh, &input.view(), 9).unwrap(),
+                "{} s{s}: a fresh instance differs",
+                e.id
+            );
+            assert_eq!(a.geometry(), input.geometry());
+        }
+    }
+}
+
+#[test]
+fn every_format_keeps_geometry_and_alpha() {
+    for e in implemented() {
+        for format in PixelFormat::ALL {
+            let mut input = synthetic(33, 20, format);
+            if let Some(a) = format.alpha_offset() {
+                for (i, px) in input.data.chunks_exact_mut(4).enumerate() {
+                    px[a] = (i * 7 % 256) as u8;
+                }
+            }
+            for s in e.severities() {
+                let mut p = CameraPerturber::new(e.id, s, 5).unwrap();
+                match run(&mut p, &input.view(), 1) {
+                    Ok(out) => {
+                        assert_eq!(out.geometry(), input.geometry(), "{} {format}", e.id);
+                        if let Some(a) = format.alpha_offset() {
+                            let same = input
+                                .data
+                                .chunks_exact(4)
+                                .zip(out.data.chunks_exact(4))
+                                .all(|(x, y)| x[a] == y[a]);
+                            assert!(same, "{} s{s} {format}: alpha changed", e.id);
+                        }
+                    }
+                    Err(Error::UnsupportedPixelFormat { .. }) if format == PixelFormat::Mono8 => {}
+                    Err(err) => panic!("{} s{s} {format}: {err}", e.id),
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn tiny_and_odd_sizes_do_not_panic() {
+    for e in implemented() {
+        for (w, h) in [(1, 1), (1, 7), (7, 1), (2, 3), (5, 5), (31, 2)] {
+            let input = synthetic(w, h, PixelFormat::Bgra8);
+            for s in e.severities() {
+                let mut p = CameraPerturber::new(e.id, s, 3).unwrap();
+                let out = run(&mut p, &input.view(), 2)
+                    .unwrap_or_else(|err| panic!("{} s{s} {w}x{h}: {err}", e.id));
+                assert_eq!(out.geometry(), input.geometry());
+            }
+        }
+    }
+}
+
+#[test]
+fn changes_a_real_frame_at_every_severity() {
+    let Some(frame) = common::kitti_image("changes_a_real_frame_at_every_severity", 0) else {
+        return;
+    };
+    let frame = resize_bilinear(&frame.view(), 612, 185);
+    for e in implemented() {
+        for s in e.severities() {
+            let mut p = CameraPerturber::new(e.id, s, 77).unwrap();
+            let out = run(&mut p, &frame.view(), 0).unwrap();
+            let d = mean_abs_diff(&frame, &out);
+            assert!(
+                d > 0.05,
+                "{} s{s}: output is (almost) the input, mean abs diff {d:.4}",
+                e.id
+            );
+        }
+    }
+}

@@ -1,0 +1,201 @@
+//! Properties every implemented LiDAR perturbation must have, at every severity: determinism,
+//! layout preserved in odd layouts (unaligned, big-endian, float64), untouched fields passed through,
+//! empty and single-point clouds, and a change on a real KITTI scan.
+
+mod common;
+
+use perturb_core::cloud::{Cloud, CloudView, Datatype, PointField, PointLayout};
+use perturb_core::lidar::Box3;
+use perturb_core::perturber::LidarPerturber;
+use perturb_core::registry::{Modality, of_modality};
+use perturb_core::rng::Rng;
+use perturb_core::sensors::SensorModel;
+
+fn implemented() -> Vec<&'static perturb_core::registry::Entry> {
+    of_modality(Modality::Lidar)
+        .filter(|e| e.is_implemented())
+        .collect()
+}
+
+/// A point layout as awkward as real drivers make them: big-endian, unaligned, a float64 z, a
+/// uint16 ring and a float64 time at offset 18 of a 26-byte point... plus a uint8 intensity.
+fn odd_layout() -> PointLayout {
+    PointLayout::new(
+        vec![
+            PointField::new("x", 0, Datatype::Float32),
+            PointField::new("y", 4, Datatype::Float32),
+            PointField::new("z", 8, Datatype::Float32),
+            PointField::new("intensity", 12, Datatype::Uint8),
+            PointField::new("ring", 13, Datatype::Uint16),
+            PointField::new("pad", 15, Datatype::Uint8),
+            PointField::new("tag", 16, Datatype::Uint16),
+            PointField::new("time", 18, Datatype::Float64),
+        ],
+        26,
+        true,
+    )
+    .unwrap()
+}
+
+/// A street-like synthetic scan: ground rings, a wall, and two car-sized blocks, with ring and time.
+fn synthetic_scan(layout: &PointLayout, n_az: usize) -> Cloud {
+    let sensor = SensorModel::vlp32c();
+    let mut pts = Vec::new();
+    let mut rings = Vec::new();
+    let mut rng = Rng::for_setup(1, 1);
+    for (ring, elev) in sensor.elevations_deg.iter().enumerate() {
+        for a in 0..n_az {
+            let az = a as f32 / n_az as f32 * std::f32::consts::TAU;
+            let dir = [
+                elev.to_radians().cos() * az.cos(),
+                elev.to_radians().cos() * az.sin(),
+                elev.to_radians().sin(),
+            ];
+            // Ground at z = -1.9, a wall at x = 30, blocks at (8, 3) and (12, -4).
+            let mut t = if dir[2] < -1e-3 { 1.9 / -dir[2] } else { 60.0 };
+            if dir[0] > 1e-3 {
+                t = t.min(30.0 / dir[0]);
+            }
+            for (cx, cy) in [(8.0f32, 3.0f32), (12.0, -4.0)] {
+                let tt = cx / dir[0].max(1e-3) - 1.0;
+                if tt > 0.0 && tt < t {
+                    let (px, py, pz) = (dir[0] * tt, dir[1] * tt, dir[2] * tt);
+                    if (px - cx).abs() < 2.0 && (py - cy).abs() < 0.9 && pz > -1.9 && pz < -0.4 {
+                        t = tt;
+                    }
+                }
+            }
+            if t < 60.0 {
+                pts.push([
+                    dir[0] * t,
+                    dir[1] * t,
+                    dir[2] * t,
+                    10.0 + (rng.f32() * 200.0).round(),
+                ]);
+                rings.push(ring as f64);
+            }
+        }
+    }
+    let mut c = Cloud::from_xyzi(layout, &pts);
+    let step = layout.point_step as usize;
+    let ring = layout.reader("ring");
+    let time = layout.reader_any(&["time", "t"]);
+    let tag = layout.reader("tag");
+    for (i, p) in c.data.chunks_exact_mut(step).enumerate() {
+        if let Some(r) = ring {
+            r.write_f64(p, rings[i]);
+        }
+        if let Some(t) = time {
+            t.write_f64(p, i as f64 * 1e-6);
+        }
+        if let Some(t) = tag {
+            t.write_f64(p, (i % 60000) as f64);
+        }
+    }
+    c
+}
+
+fn boxes() -> Vec<Box3> {
+    vec![
+        Box3 {
+            center: [8.0, 3.0, -1.15],
+            size: [4.0, 1.8, 1.5],
+            yaw: 0.0,
+        },
+        Box3 {
+            center: [12.0, -4.0, -1.15],
+            size: [4.0, 1.8, 1.5],
+            yaw: 0.0,
+        },
+    ]
+}
+
+fn apply(p: &mut LidarPerturber, c: &CloudView<'_>, seq: u64) -> Cloud {
+    let b = boxes();
+    p.apply_owned(c, seq, Some(&b))
+        .unwrap_or_else(|e| panic!("{}: {e}", p.spec().entry.id))
+}
+
+#[test]
+fn deterministic_layout_preserving_and_passing_fields_through() {
+    let layout = odd_layout();
+    let cloud = synthetic_scan(&layout, 360);
+    let view = cloud.view();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let two = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let tag = layout.reader("tag").unwrap();
+    let time = layout.reader("time").unwrap();
+    for e in implemented() {
+        for s in e.severities() {
+            let mut p = LidarPerturber::new(e.id, s, 99, SensorModel::vlp32c()).unwrap();
+            let a = one.install(|| apply(&mut p, &view, 4));
+            let b = two.install(|| apply(&mut p, &view, 4));
+            assert_eq!(
+                a, b,
+                "{} s{s}: output depends on thread count or call history",
+                e.id
+            );
+            assert_eq!(*a.layout, layout, "{} s{s}: layout changed", e.id);
+            assert!(
+                p.max_output_bytes(&view) >= a.data.len(),
+                "{} s{s}: max_output_bytes is not an upper bound",
+                e.id
+            );
+            // Every output point's untouched fields come from one input point.
+            for k in 0..a.len() {
+                let q = a.view().point(k);
+                let i = tag.read_f64(q) as usize;
+                assert!(i < cloud.len(), "{} s{s}: tag field corrupted", e.id);
+                let t = time.read_f64(q);
+                assert!(
+                    (t - i as f64 * 1e-6).abs() < 1e-12,
+                    "{} s{s}: time field does not travel with its point",
+                    e.id
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn empty_and_single_point_clouds() {
+    let layout = odd_layout();
+    let empty = Cloud::zeroed(std::sync::Arc::new(layout.clone()), 0);
+    let single = Cloud::from_xyzi(&layout, &[[5.0, 1.0, -1.0, 40.0]]);
+    for e in implemented() {
+        for s in e.severities() {
+            let mut p = LidarPerturber::new(e.id, s, 1, SensorModel::vlp32c()).unwrap();
+            let out = apply(&mut p, &empty.view(), 0);
+            assert_eq!(*out.layout, layout);
+            let out = apply(&mut p, &single.view(), 0);
+            assert!(
+                out.len() <= p.max_output_bytes(&single.view()) / 26,
+                "{} s{s}",
+                e.id
+            );
+        }
+    }
+}
+
+#[test]
+fn changes_a_real_kitti_scan_at_every_severity() {
+    let Some(scan) = common::kitti_scan("changes_a_real_kitti_scan_at_every_severity", 0) else {
+        return;
+    };
+    let view = scan.view();
+    let sensor = SensorModel::hdl64e();
+    for e in implemented() {
+        for s in e.severities() {
+            let mut p = LidarPerturber::new(e.id, s, 7, sensor.clone()).unwrap();
+            let boxes = boxes();
+            let out = p.apply_owned(&view, 0, Some(&boxes)).unwrap();
+            assert_ne!(out.data, scan.data, "{} s{s}: the scan is unchanged", e.id);
+        }
+    }
+}
