@@ -171,6 +171,103 @@ pub fn separable_filter(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, ke
         });
 }
 
+/// OpenCV's 8-bit RGB to HSV (`COLOR_RGB2HSV`): H in 0..180, S and V in 0..255, with OpenCV's
+/// fixed-point rounding, so a round trip reproduces the references' quantisation.
+#[inline]
+pub fn rgb_to_hsv(r: u8, g: u8, b: u8) -> (u8, u8, u8) {
+    const SHIFT: i32 = 12;
+    let (r, g, b) = (r as i32, g as i32, b as i32);
+    let v = r.max(g).max(b);
+    let vmin = r.min(g).min(b);
+    let diff = v - vmin;
+    let s = if v == 0 {
+        0
+    } else {
+        let sdiv = ((255 << SHIFT) as f64 / v as f64).round() as i32;
+        (diff * sdiv + (1 << (SHIFT - 1))) >> SHIFT
+    };
+    let mut h = if diff == 0 {
+        0
+    } else {
+        let num = if v == r {
+            g - b
+        } else if v == g {
+            b - r + 2 * diff
+        } else {
+            r - g + 4 * diff
+        };
+        let hdiv = ((180 << SHIFT) as f64 / (6.0 * diff as f64)).round() as i32;
+        (num * hdiv + (1 << (SHIFT - 1))) >> SHIFT
+    };
+    if h < 0 {
+        h += 180;
+    }
+    (h as u8, s as u8, v as u8)
+}
+
+/// OpenCV's 8-bit HSV to RGB (`COLOR_HSV2RGB`, H in 0..180): computed in float and rounded.
+#[inline]
+pub fn hsv_to_rgb(h: u8, s: u8, v: u8) -> (u8, u8, u8) {
+    let (hf, sf, vf) = (h as f32 * (6.0 / 180.0), s as f32 / 255.0, v as f32 / 255.0);
+    let (r, g, b) = if sf == 0.0 {
+        (vf, vf, vf)
+    } else {
+        let mut hh = hf;
+        let mut sector = hh.floor() as i32;
+        hh -= sector as f32;
+        if sector < 0 {
+            sector += 6;
+        }
+        let sector = (sector % 6) as usize;
+        let tab = [
+            vf,
+            vf * (1.0 - sf),
+            vf * (1.0 - sf * hh),
+            vf * (1.0 - sf * (1.0 - hh)),
+        ];
+        const SECTOR: [[usize; 3]; 6] = [
+            [1, 3, 0],
+            [1, 0, 2],
+            [3, 0, 1],
+            [0, 2, 1],
+            [0, 1, 3],
+            [2, 1, 0],
+        ];
+        let [bi, gi, ri] = SECTOR[sector];
+        (tab[ri], tab[gi], tab[bi])
+    };
+    let q = |x: f32| (x * 255.0).round().clamp(0.0, 255.0) as u8;
+    (q(r), q(g), q(b))
+}
+
+/// Applies `f(h, s, v) -> (h, s, v)` to every pixel through OpenCV-exact HSV conversions; alpha is
+/// copied. For mono8 the single channel is treated as V with zero saturation.
+pub fn map_hsv<F>(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, f: F)
+where
+    F: Fn(u8, u8, u8) -> (u8, u8, u8) + Send + Sync,
+{
+    let format = input.format;
+    let c = format.channels();
+    let [ri, gi, bi] = format.rgb_offsets();
+    par_rows(input, output, |_, src, dst| {
+        for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
+            if format.is_mono() {
+                q[0] = f(0, 0, p[0]).2;
+                continue;
+            }
+            let (h, s, v) = rgb_to_hsv(p[ri], p[gi], p[bi]);
+            let (h, s, v) = f(h, s, v);
+            let (r, g, b) = hsv_to_rgb(h, s, v);
+            q[ri] = r;
+            q[gi] = g;
+            q[bi] = b;
+            if let Some(a) = format.alpha_offset() {
+                q[a] = p[a];
+            }
+        }
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -181,6 +278,34 @@ mod tests {
         let idx: Vec<usize> = (-3..8).map(|i| reflect101(i, 5)).collect();
         assert_eq!(idx, vec![3, 2, 1, 0, 1, 2, 3, 4, 3, 2, 1]);
         assert_eq!(reflect101(-4, 1), 0);
+    }
+
+    #[test]
+    fn hsv_matches_opencv_reference_values() {
+        // Expected values worked by hand from OpenCV's fixed-point formulas (hsv_shift 12).
+        assert_eq!(rgb_to_hsv(255, 0, 0), (0, 255, 255));
+        assert_eq!(rgb_to_hsv(0, 255, 0), (60, 255, 255));
+        assert_eq!(rgb_to_hsv(0, 0, 255), (120, 255, 255));
+        assert_eq!(rgb_to_hsv(200, 100, 50), (10, 191, 200));
+        assert_eq!(rgb_to_hsv(10, 20, 30), (105, 170, 30));
+        assert_eq!(hsv_to_rgb(10, 191, 200), (200, 100, 50));
+        assert_eq!(hsv_to_rgb(0, 0, 77), (77, 77, 77));
+        // Round trips stay within the 8-bit quantisation.
+        for (r, g, b) in [
+            (12u8, 200u8, 90u8),
+            (250, 250, 1),
+            (3, 4, 5),
+            (128, 64, 255),
+        ] {
+            let (h, s, v) = rgb_to_hsv(r, g, b);
+            let (r2, g2, b2) = hsv_to_rgb(h, s, v);
+            for (a, b) in [(r, r2), (g, g2), (b, b2)] {
+                assert!(
+                    (a as i32 - b as i32).abs() <= 4,
+                    "{r} {g} {b} -> {r2} {g2} {b2}"
+                );
+            }
+        }
     }
 
     #[test]
