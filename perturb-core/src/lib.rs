@@ -11,6 +11,7 @@
 
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod camera;
 pub mod cloud;
 pub mod detector;

@@ -1,0 +1,63 @@
+//! Times the implemented perturbations on a real KITTI frame or scan, single-threaded.
+//!
+//! ```text
+//! cargo run --release -p perturb-core --example bench -- camera 1920 1208 [ID ...]
+//! cargo run --release -p perturb-core --example bench -- lidar [ID ...]
+//! ```
+//! The data comes from `../shared/data` (or `$PERTURB_SHARED_DATA`). `perturb bench` is the full
+//! report; this example is the quick loop while working on one perturbation.
+
+use perturb_core::bench::{Timing, time_camera, time_lidar};
+use perturb_core::formats::{kitti, picture};
+use perturb_core::image::resize_bilinear;
+use perturb_core::registry::{Modality, of_modality};
+use perturb_core::sensors::SensorModel;
+use std::path::PathBuf;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let data = std::env::var_os("PERTURB_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("../shared/data"));
+    let modality = args.first().map(String::as_str).unwrap_or("camera");
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let mut rows: Vec<Timing> = Vec::new();
+    if modality == "camera" {
+        let w: u32 = args.get(1).map_or(Ok(1920), |s| s.parse())?;
+        let h: u32 = args.get(2).map_or(Ok(1208), |s| s.parse())?;
+        let ids = &args[3.min(args.len())..];
+        let frame = picture::decode(&std::fs::read(data.join("kitti/image_2/000000.png"))?)?;
+        let frame = resize_bilinear(&frame.view(), w, h);
+        for e in of_modality(Modality::Camera).filter(|e| e.is_implemented()) {
+            if !ids.is_empty() && !ids.iter().any(|i| i.eq_ignore_ascii_case(e.id)) {
+                continue;
+            }
+            for s in e.severities() {
+                rows.push(pool.install(|| time_camera(e, s, 1, &frame.view(), 10))?);
+            }
+        }
+    } else {
+        let ids = &args[1.min(args.len())..];
+        let scan = kitti::decode_kitti(&std::fs::read(data.join("kitti/velodyne/000000.bin"))?)?;
+        let sensor = SensorModel::hdl64e();
+        for e in of_modality(Modality::Lidar).filter(|e| e.is_implemented()) {
+            if !ids.is_empty() && !ids.iter().any(|i| i.eq_ignore_ascii_case(e.id)) {
+                continue;
+            }
+            for s in e.severities() {
+                rows.push(pool.install(|| time_lidar(e, s, 1, &sensor, &scan.view(), 10))?);
+            }
+        }
+    }
+    println!(
+        "{:<7} {:<24} {:>3} {:>10} {:>10} {:>10}",
+        "id", "name", "sev", "setup_ms", "median_ms", "max_ms"
+    );
+    for t in rows {
+        println!(
+            "{:<7} {:<24} {:>3} {:>10.2} {:>10.2} {:>10.2}",
+            t.id, t.name, t.severity, t.setup_ms, t.median_ms, t.max_ms
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,125 @@
+//! Timing of perturbations on real frames: the numbers behind `perturb bench` and the feasibility
+//! report. Pure measurement over in-memory inputs; callers choose the thread pool (run inside a
+//! one-thread rayon pool for single-core figures).
+
+use crate::cloud::CloudView;
+use crate::error::Result;
+use crate::image::ImageView;
+use crate::perturber::{CameraPerturber, LidarPerturber};
+use crate::registry::Entry;
+use crate::sensors::SensorModel;
+use std::time::{Duration, Instant};
+
+/// Latency statistics of one perturbation at one severity.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Timing {
+    /// Perturbation ID.
+    pub id: &'static str,
+    /// Perturbation name.
+    pub name: &'static str,
+    /// Severity.
+    pub severity: u8,
+    /// Frames timed.
+    pub frames: usize,
+    /// Configuration (build) time in milliseconds, paid once.
+    pub setup_ms: f64,
+    /// Mean per-frame latency in milliseconds.
+    pub mean_ms: f64,
+    /// Median per-frame latency in milliseconds.
+    pub median_ms: f64,
+    /// 99th percentile in milliseconds.
+    pub p99_ms: f64,
+    /// Maximum in milliseconds.
+    pub max_ms: f64,
+}
+
+/// Summary statistics of a list of durations.
+pub fn summarize(
+    id: &'static str,
+    name: &'static str,
+    severity: u8,
+    setup: Duration,
+    samples: &mut [Duration],
+) -> Timing {
+    samples.sort();
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let n = samples.len().max(1);
+    let pick = |q: f64| {
+        samples
+            .get(((samples.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+            .unwrap_or_default()
+    };
+    Timing {
+        id,
+        name,
+        severity,
+        frames: samples.len(),
+        setup_ms: ms(setup),
+        mean_ms: samples.iter().map(|d| ms(*d)).sum::<f64>() / n as f64,
+        median_ms: ms(pick(0.5)),
+        p99_ms: ms(pick(0.99)),
+        max_ms: samples.last().map_or(0.0, |d| ms(*d)),
+    }
+}
+
+/// Times `frames` applications of a camera perturbation to `input` (sequence numbers 0, 1, ...),
+/// after one untimed warm-up frame; the setup time is measured separately.
+pub fn time_camera(
+    entry: &'static Entry,
+    severity: u8,
+    seed: u64,
+    input: &ImageView<'_>,
+    frames: usize,
+) -> Result<Timing> {
+    let mut p = CameraPerturber::new(entry.id, severity, seed)?;
+    let t0 = Instant::now();
+    p.prepare(input.geometry())?;
+    let setup = t0.elapsed();
+    let mut out = crate::image::Image::with_geometry(input.geometry());
+    p.apply(input, &mut out.view_mut(), u64::MAX / 2)?;
+    let mut samples = Vec::with_capacity(frames);
+    for seq in 0..frames as u64 {
+        let t = Instant::now();
+        p.apply(input, &mut out.view_mut(), seq)?;
+        samples.push(t.elapsed());
+    }
+    Ok(summarize(
+        entry.id,
+        entry.name,
+        severity,
+        setup,
+        &mut samples,
+    ))
+}
+
+/// Times `frames` applications of a LiDAR perturbation to `input`, writing into one reused
+/// buffer. Object-level perturbations get their boxes the way the daemon does (see
+/// [`LidarPerturber::apply`]), so the detector's cost is included where it is needed.
+pub fn time_lidar(
+    entry: &'static Entry,
+    severity: u8,
+    seed: u64,
+    sensor: &SensorModel,
+    input: &CloudView<'_>,
+    frames: usize,
+) -> Result<Timing> {
+    let t0 = Instant::now();
+    let mut p = LidarPerturber::new(entry.id, severity, seed, sensor.clone())?;
+    let setup = t0.elapsed();
+    let mut out = vec![0u8; p.max_output_bytes(input)];
+    p.apply(input, &mut out, u64::MAX / 2, None)?;
+    let mut samples = Vec::with_capacity(frames);
+    for seq in 0..frames as u64 {
+        let t = Instant::now();
+        p.apply(input, &mut out, seq, None)?;
+        samples.push(t.elapsed());
+    }
+    Ok(summarize(
+        entry.id,
+        entry.name,
+        severity,
+        setup,
+        &mut samples,
+    ))
+}
