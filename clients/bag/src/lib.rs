@@ -1,0 +1,84 @@
+//! # perturb-bag
+//!
+//! rosbag2 bags in MCAP storage: reading sensor messages in log-time order (the order a replayer
+//! needs, which is not always file order) and writing bags that `ros2 bag`, the Python `rosbags`
+//! package and the `mcap` tools read.
+//!
+//! Reading memory-maps the file and decompresses one chunk at a time, so a bag of hundreds of
+//! gigabytes replays in bounded memory. A bag whose summary is missing or corrupt (a recorder that
+//! was killed, a truncated copy) is read in file order up to the damage, and the damage is
+//! reported. ROS 1 profile MCAP files are refused with a message saying how to convert them.
+//!
+//! ```no_run
+//! use perturb_bag::{Bag, Filter};
+//! let bag = Bag::open("recording.mcap".as_ref())?;
+//! let report = bag.for_each(&Filter::default(), |msg| {
+//!     println!("{} {} {} bytes", msg.log_time, msg.topic, msg.data.len());
+//!     Ok(std::ops::ControlFlow::Continue(()))
+//! })?;
+//! println!("{} messages, damage: {:?}", report.delivered, report.damage);
+//! # Ok::<(), perturb_bag::BagError>(())
+//! ```
+
+mod read;
+pub mod schema;
+mod write;
+
+pub use read::{Bag, BagMessage, Filter, ReadOrder, ReadReport, SensorMessage, TopicInfo};
+pub use write::{BagWriter, Compression, WriterOptions};
+
+use std::path::PathBuf;
+
+/// What can go wrong with a bag; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum BagError {
+    /// The file or directory could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not a readable MCAP file.
+    #[error("{path}: not a readable MCAP file: {reason}")]
+    NotMcap {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The bag uses a profile this project does not read.
+    #[error("{path}: MCAP profile `{profile}` is not supported: {hint}")]
+    UnsupportedProfile {
+        /// The file.
+        path: PathBuf,
+        /// The profile found.
+        profile: String,
+        /// What to do instead.
+        hint: &'static str,
+    },
+    /// A message could not be decoded.
+    #[error("{path}: message on `{topic}` at log time {log_time} ns: {source}")]
+    Message {
+        /// The file.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// Its log time.
+        log_time: u64,
+        /// The decoding error.
+        source: perturb_core::Error,
+    },
+    /// Writing the bag failed.
+    #[error("{path}: cannot write bag: {reason}")]
+    Write {
+        /// The bag directory or file.
+        path: PathBuf,
+        /// What failed.
+        reason: String,
+    },
+    /// The caller's callback stopped the read with an error.
+    #[error("{0}")]
+    Callback(String),
+}

@@ -1,0 +1,480 @@
+//! Reading rosbag2 MCAP bags.
+
+use crate::BagError;
+use mcap::sans_io::indexed_reader::{IndexedReadEvent, IndexedReader, IndexedReaderOptions};
+use perturb_core::formats::ros::{CompressedImageMsg, ImageMsg, PointCloud2Msg};
+use std::collections::BTreeMap;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Which messages to read.
+#[derive(Clone, Debug, Default)]
+pub struct Filter {
+    /// Only these topics (all when empty).
+    pub topics: Vec<String>,
+    /// Only messages with log time >= this (ns).
+    pub start: Option<u64>,
+    /// Only messages with log time < this (ns).
+    pub end: Option<u64>,
+}
+
+impl Filter {
+    fn accepts(&self, topic: &str, log_time: u64) -> bool {
+        (self.topics.is_empty() || self.topics.iter().any(|t| t == topic))
+            && self.start.is_none_or(|s| log_time >= s)
+            && self.end.is_none_or(|e| log_time < e)
+    }
+}
+
+/// One topic of a bag.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TopicInfo {
+    /// Topic name.
+    pub topic: String,
+    /// Message type (`sensor_msgs/msg/Image`).
+    pub type_name: String,
+    /// Schema encoding (`ros2msg`, `ros2idl`).
+    pub schema_encoding: String,
+    /// Schema text.
+    pub schema: Vec<u8>,
+    /// Message encoding (`cdr`).
+    pub message_encoding: String,
+    /// Channel metadata (rosbag2 stores `offered_qos_profiles` here).
+    pub metadata: BTreeMap<String, String>,
+    /// Messages on the topic, when the bag has statistics.
+    pub message_count: Option<u64>,
+}
+
+/// A message, borrowed from the bag while the callback runs.
+#[derive(Clone, Copy, Debug)]
+pub struct BagMessage<'a> {
+    /// Topic name.
+    pub topic: &'a str,
+    /// Message type.
+    pub type_name: &'a str,
+    /// Receive time in ns.
+    pub log_time: u64,
+    /// Publish time in ns.
+    pub publish_time: u64,
+    /// Per-channel sequence number.
+    pub sequence: u32,
+    /// The CDR bytes.
+    pub data: &'a [u8],
+    /// The file the message comes from.
+    pub path: &'a Path,
+}
+
+/// A decoded sensor message.
+#[derive(Clone, Debug)]
+pub enum SensorMessage<'a> {
+    /// `sensor_msgs/msg/Image`.
+    Image(ImageMsg<'a>),
+    /// `sensor_msgs/msg/CompressedImage`.
+    Compressed(CompressedImageMsg<'a>),
+    /// `sensor_msgs/msg/PointCloud2`.
+    Cloud(PointCloud2Msg<'a>),
+}
+
+impl<'a> BagMessage<'a> {
+    /// Decodes an Image, CompressedImage or PointCloud2; `None` for other types.
+    pub fn decode(&self) -> Option<Result<SensorMessage<'a>, BagError>> {
+        let wrap = |e| BagError::Message {
+            path: self.path.to_path_buf(),
+            topic: self.topic.to_string(),
+            log_time: self.log_time,
+            source: e,
+        };
+        Some(match self.type_name {
+            "sensor_msgs/msg/Image" => ImageMsg::decode(self.data)
+                .map(SensorMessage::Image)
+                .map_err(wrap),
+            "sensor_msgs/msg/CompressedImage" => CompressedImageMsg::decode(self.data)
+                .map(SensorMessage::Compressed)
+                .map_err(wrap),
+            "sensor_msgs/msg/PointCloud2" => PointCloud2Msg::decode(self.data)
+                .map(SensorMessage::Cloud)
+                .map_err(wrap),
+            _ => return None,
+        })
+    }
+}
+
+/// The order in which messages were delivered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReadOrder {
+    /// Log-time order, through the bag's index.
+    LogTime,
+    /// File order: the bag has no usable index (for example a recording that was killed).
+    FileOrder,
+}
+
+/// What a read delivered.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ReadReport {
+    /// Messages passed to the callback.
+    pub delivered: u64,
+    /// How they were ordered.
+    pub order: ReadOrder,
+    /// Damage found (the messages before it were delivered), e.g. a truncated last chunk.
+    pub damage: Option<String>,
+    /// Remarks that are not damage, e.g. a file without index read in file order.
+    pub notes: Vec<String>,
+}
+
+struct File {
+    path: PathBuf,
+    map: memmap2::Mmap,
+    summary: Option<mcap::Summary>,
+    summary_error: Option<String>,
+}
+
+/// An open bag: one `.mcap` file, or a rosbag2 directory of split `.mcap` files.
+pub struct Bag {
+    files: Vec<File>,
+}
+
+impl std::fmt::Debug for Bag {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Bag")
+            .field(
+                "files",
+                &self.files.iter().map(|f| &f.path).collect::<Vec<_>>(),
+            )
+            .finish()
+    }
+}
+
+const ROS1_HINT: &str = "this is a ROS 1 recording; convert it to a ROS 2 bag first, e.g. `rosbags-convert --src in.mcap --dst out_dir` (pip install rosbags)";
+
+fn open_file(path: &Path) -> Result<File, BagError> {
+    let io = |source| BagError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let f = std::fs::File::open(path).map_err(io)?;
+    // SAFETY: the map is read-only and the bag is not expected to change while it is read; a
+    // concurrent truncation by another process would be a user error this crate cannot prevent.
+    let map = unsafe { memmap2::Mmap::map(&f) }.map_err(io)?;
+    if map.len() < 8 || &map[..8] != mcap::MAGIC {
+        return Err(BagError::NotMcap {
+            path: path.to_path_buf(),
+            reason: "the file does not start with the MCAP magic bytes".into(),
+        });
+    }
+    // The header record names the profile.
+    let mut records = mcap::read::LinearReader::new_with_options(
+        &map,
+        mcap::read::Options::IgnoreEndMagic.into(),
+    )
+    .map_err(|e| BagError::NotMcap {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    if let Some(Ok(mcap::records::Record::Header(h))) = records.next()
+        && h.profile == "ros1"
+    {
+        return Err(BagError::UnsupportedProfile {
+            path: path.to_path_buf(),
+            profile: h.profile,
+            hint: ROS1_HINT,
+        });
+    }
+    let (summary, summary_error) = match mcap::Summary::read(&map) {
+        Ok(Some(s))
+            if !s.chunk_indexes.is_empty()
+                || s.stats.as_ref().is_some_and(|st| st.message_count == 0) =>
+        {
+            (Some(s), None)
+        }
+        Ok(Some(_)) => (None, Some("the summary has no chunk index".to_string())),
+        Ok(None) => (None, Some("the file has no summary section".to_string())),
+        Err(e) => (None, Some(format!("the summary is unreadable ({e})"))),
+    };
+    Ok(File {
+        path: path.to_path_buf(),
+        map,
+        summary,
+        summary_error,
+    })
+}
+
+impl Bag {
+    /// Opens an `.mcap` file or a rosbag2 directory holding `.mcap` files (read in name order,
+    /// which is recording order for split bags).
+    pub fn open(path: &Path) -> Result<Bag, BagError> {
+        let paths = if path.is_dir() {
+            let rd = std::fs::read_dir(path).map_err(|source| BagError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            let mut v: Vec<PathBuf> = rd
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+                .collect();
+            v.sort();
+            if v.is_empty() {
+                return Err(BagError::NotMcap {
+                    path: path.to_path_buf(),
+                    reason: "the directory holds no .mcap file (sqlite3 rosbag2 storage is not supported; re-record with `--storage mcap` or convert with `ros2 bag convert`)".into(),
+                });
+            }
+            v
+        } else {
+            vec![path.to_path_buf()]
+        };
+        let files = paths
+            .iter()
+            .map(|p| open_file(p))
+            .collect::<Result<_, _>>()?;
+        Ok(Bag { files })
+    }
+
+    /// The files of the bag.
+    pub fn paths(&self) -> Vec<&Path> {
+        self.files.iter().map(|f| f.path.as_path()).collect()
+    }
+
+    /// True if every file has a usable index (messages come in log-time order).
+    pub fn is_indexed(&self) -> bool {
+        self.files.iter().all(|f| f.summary.is_some())
+    }
+
+    /// The topics of the bag with their types and, where the bag has statistics, message counts.
+    /// For a bag without a summary the topics are collected by scanning it.
+    pub fn topics(&self) -> Result<Vec<TopicInfo>, BagError> {
+        let mut by_topic: BTreeMap<String, TopicInfo> = BTreeMap::new();
+        for f in &self.files {
+            let mut add = |ch: &mcap::Channel<'_>, count: Option<u64>| {
+                let (type_name, enc, schema) = ch
+                    .schema
+                    .as_ref()
+                    .map(|s| (s.name.clone(), s.encoding.clone(), s.data.to_vec()))
+                    .unwrap_or_default();
+                let e = by_topic
+                    .entry(ch.topic.clone())
+                    .or_insert_with(|| TopicInfo {
+                        topic: ch.topic.clone(),
+                        type_name,
+                        schema_encoding: enc,
+                        schema,
+                        message_encoding: ch.message_encoding.clone(),
+                        metadata: ch.metadata.clone(),
+                        message_count: Some(0),
+                    });
+                e.message_count = match (e.message_count, count) {
+                    (Some(a), Some(b)) => Some(a + b),
+                    _ => None,
+                };
+            };
+            match &f.summary {
+                Some(s) => {
+                    for (id, ch) in &s.channels {
+                        let count = s
+                            .stats
+                            .as_ref()
+                            .and_then(|st| st.channel_message_counts.get(id).copied());
+                        add(ch, count);
+                    }
+                }
+                None => {
+                    let mut counts: BTreeMap<String, (Arc<mcap::Channel<'static>>, u64)> =
+                        BTreeMap::new();
+                    let stream = mcap::MessageStream::new_with_options(
+                        &f.map,
+                        mcap::read::Options::IgnoreEndMagic.into(),
+                    )
+                    .map_err(|e| BagError::NotMcap {
+                        path: f.path.clone(),
+                        reason: e.to_string(),
+                    })?;
+                    for m in stream {
+                        let Ok(m) = m else { break };
+                        counts
+                            .entry(m.channel.topic.clone())
+                            .or_insert((m.channel.clone(), 0))
+                            .1 += 1;
+                    }
+                    for (_, (ch, n)) in counts {
+                        add(&ch, Some(n));
+                    }
+                }
+            }
+        }
+        Ok(by_topic.into_values().collect())
+    }
+
+    /// Calls `f` for every message passing `filter`, in log-time order (file order for a bag
+    /// without a usable index). `f` returns `Break` to stop early. Damage found part-way is
+    /// reported in the [`ReadReport`], after the messages before it were delivered.
+    pub fn for_each<F>(&self, filter: &Filter, mut f: F) -> Result<ReadReport, BagError>
+    where
+        F: FnMut(BagMessage<'_>) -> Result<ControlFlow<()>, BagError>,
+    {
+        let mut report = ReadReport {
+            delivered: 0,
+            order: if self.is_indexed() {
+                ReadOrder::LogTime
+            } else {
+                ReadOrder::FileOrder
+            },
+            damage: None,
+            notes: Vec::new(),
+        };
+        for file in &self.files {
+            let flow = match &file.summary {
+                Some(s) => read_indexed(file, s, filter, &mut f, &mut report)?,
+                None => read_linear(file, filter, &mut f, &mut report)?,
+            };
+            if flow.is_break() || report.damage.is_some() {
+                break;
+            }
+        }
+        Ok(report)
+    }
+}
+
+fn read_indexed<F>(
+    file: &File,
+    summary: &mcap::Summary,
+    filter: &Filter,
+    f: &mut F,
+    report: &mut ReadReport,
+) -> Result<ControlFlow<()>, BagError>
+where
+    F: FnMut(BagMessage<'_>) -> Result<ControlFlow<()>, BagError>,
+{
+    let mut opts = IndexedReaderOptions::new();
+    if !filter.topics.is_empty() {
+        opts = opts.include_topics(filter.topics.clone());
+    }
+    if let Some(s) = filter.start {
+        opts = opts.starting_at(s);
+    }
+    if let Some(e) = filter.end {
+        opts = opts.ending_before(e);
+    }
+    let mut reader =
+        IndexedReader::new_with_options(summary, opts).map_err(|e| BagError::NotMcap {
+            path: file.path.clone(),
+            reason: e.to_string(),
+        })?;
+    while let Some(event) = reader.next_event() {
+        let event = match event {
+            Ok(e) => e,
+            Err(e) => {
+                report.damage = Some(format!("{}: {e}", file.path.display()));
+                return Ok(ControlFlow::Continue(()));
+            }
+        };
+        match event {
+            IndexedReadEvent::ReadChunkRequest { offset, length } => {
+                let (start, end) = (offset as usize, offset as usize + length);
+                if end > file.map.len() {
+                    report.damage = Some(format!(
+                        "{}: chunk at byte {start} ({length} bytes) runs past the end of the file ({} bytes): truncated",
+                        file.path.display(),
+                        file.map.len()
+                    ));
+                    return Ok(ControlFlow::Continue(()));
+                }
+                if let Err(e) = reader.insert_chunk_record_data(offset, &file.map[start..end]) {
+                    report.damage = Some(format!(
+                        "{}: chunk at byte {start}: {e}",
+                        file.path.display()
+                    ));
+                    return Ok(ControlFlow::Continue(()));
+                }
+            }
+            IndexedReadEvent::Message { header, data } => {
+                let Some(ch) = summary.channels.get(&header.channel_id) else {
+                    report.damage = Some(format!(
+                        "{}: message on unknown channel {}",
+                        file.path.display(),
+                        header.channel_id
+                    ));
+                    return Ok(ControlFlow::Continue(()));
+                };
+                let type_name = ch.schema.as_ref().map_or("", |s| s.name.as_str());
+                report.delivered += 1;
+                let flow = f(BagMessage {
+                    topic: &ch.topic,
+                    type_name,
+                    log_time: header.log_time,
+                    publish_time: header.publish_time,
+                    sequence: header.sequence,
+                    data,
+                    path: &file.path,
+                })?;
+                if flow.is_break() {
+                    return Ok(flow);
+                }
+            }
+        }
+    }
+    Ok(ControlFlow::Continue(()))
+}
+
+fn read_linear<F>(
+    file: &File,
+    filter: &Filter,
+    f: &mut F,
+    report: &mut ReadReport,
+) -> Result<ControlFlow<()>, BagError>
+where
+    F: FnMut(BagMessage<'_>) -> Result<ControlFlow<()>, BagError>,
+{
+    let stream = mcap::MessageStream::new_with_options(
+        &file.map,
+        mcap::read::Options::IgnoreEndMagic.into(),
+    )
+    .map_err(|e| BagError::NotMcap {
+        path: file.path.clone(),
+        reason: e.to_string(),
+    })?;
+    for m in stream {
+        let m = match m {
+            Ok(m) => m,
+            Err(e) => {
+                report.damage = Some(format!(
+                    "{}: {} ({}; read in file order because {})",
+                    file.path.display(),
+                    e,
+                    if report.delivered == 0 {
+                        "no message before it"
+                    } else {
+                        "messages before it were read"
+                    },
+                    file.summary_error
+                        .as_deref()
+                        .unwrap_or("the index is unusable")
+                ));
+                return Ok(ControlFlow::Continue(()));
+            }
+        };
+        if !filter.accepts(&m.channel.topic, m.log_time) {
+            continue;
+        }
+        let type_name = m.channel.schema.as_ref().map_or("", |s| s.name.as_str());
+        report.delivered += 1;
+        let flow = f(BagMessage {
+            topic: &m.channel.topic,
+            type_name,
+            log_time: m.log_time,
+            publish_time: m.publish_time,
+            sequence: m.sequence,
+            data: &m.data,
+            path: &file.path,
+        })?;
+        if flow.is_break() {
+            return Ok(flow);
+        }
+    }
+    if let Some(why) = &file.summary_error {
+        report.notes.push(format!(
+            "{}: {why}; messages were read in file order",
+            file.path.display()
+        ));
+    }
+    Ok(ControlFlow::Continue(()))
+}
