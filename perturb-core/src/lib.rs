@@ -23,5 +23,6 @@ pub mod perturber;
 pub mod registry;
 pub mod rng;
 pub mod sensors;
+pub mod synthetic;
 
 pub use error::{Error, Result};

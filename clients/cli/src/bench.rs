@@ -1,0 +1,247 @@
+//! `perturb bench`: latency of every perturbation at every severity on a real frame or scan.
+
+use crate::files::{Loaded, load, sensor_for};
+use anyhow::{Context, Result, bail};
+use perturb_core::bench::{Timing, time_camera, time_lidar};
+use perturb_core::image::resize_bilinear;
+use perturb_core::registry::{Modality, of_modality};
+use std::path::PathBuf;
+
+/// Output format of the report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// An aligned table for the terminal.
+    #[default]
+    Table,
+    /// A JSON array, one object per perturbation and severity.
+    Json,
+    /// A markdown table.
+    Markdown,
+    /// CSV, one row per perturbation and severity.
+    Csv,
+}
+
+/// Arguments of `perturb bench`.
+#[derive(clap::Args)]
+#[command(after_help = "Examples:
+  perturb bench --modality camera                       # KITTI frame scaled to 1920x1208, one thread
+  perturb bench --modality camera --width 800 --height 503 --json
+  perturb bench --modality lidar --input scan.bin --threads 2
+
+Without --input the real KITTI frame or scan in ../shared/data is used. Times are per frame,
+after a warm-up frame; setup (tables, textures, particle sets) is reported separately.")]
+pub struct Args {
+    /// camera or lidar.
+    #[arg(long)]
+    modality: Modality,
+    /// Image width the input is scaled to (camera).
+    #[arg(long, default_value_t = 1920)]
+    width: u32,
+    /// Image height the input is scaled to (camera).
+    #[arg(long, default_value_t = 1208)]
+    height: u32,
+    /// Input image or point-cloud file (default: KITTI 000000 from ../shared/data).
+    #[arg(long)]
+    input: Option<PathBuf>,
+    /// Frames timed per perturbation and severity.
+    #[arg(long, default_value_t = 10)]
+    frames: usize,
+    /// Worker threads per frame (1 gives the single-core figure).
+    #[arg(long, default_value_t = 1)]
+    threads: usize,
+    /// Only these IDs (repeatable).
+    #[arg(long = "id")]
+    ids: Vec<String>,
+    /// Budget in milliseconds (default 33 for camera, 200 for LiDAR).
+    #[arg(long)]
+    budget_ms: Option<f64>,
+    /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
+    #[arg(long)]
+    sensor: Option<String>,
+    /// Full-scale intensity of the cloud, 1 or 255.
+    #[arg(long)]
+    intensity_max: Option<f32>,
+    /// Print JSON (shorthand for --format json).
+    #[arg(long)]
+    json: bool,
+    /// Report format.
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    format: Format,
+}
+
+#[derive(serde::Serialize)]
+struct Row<'a> {
+    #[serde(flatten)]
+    timing: &'a Timing,
+    budget_ms: f64,
+    fits_budget: bool,
+}
+
+fn default_input(modality: Modality) -> Result<PathBuf> {
+    let base = std::env::var_os("PERTURB_SHARED_DATA")
+        .map_or_else(|| PathBuf::from("../shared/data"), PathBuf::from);
+    let p = match modality {
+        Modality::Camera => base.join("kitti/image_2/000000.png"),
+        Modality::Lidar => base.join("kitti/velodyne/000000.bin"),
+    };
+    if !p.exists() {
+        bail!(
+            "no --input given and the default real input {} does not exist",
+            p.display()
+        );
+    }
+    Ok(p)
+}
+
+/// Runs the benchmark and prints the report.
+pub fn run(a: Args) -> Result<()> {
+    let input = match &a.input {
+        Some(p) => p.clone(),
+        None => default_input(a.modality)?,
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.max(1))
+        .build()?;
+    let budget = a.budget_ms.unwrap_or(match a.modality {
+        Modality::Camera => 33.0,
+        Modality::Lidar => 200.0,
+    });
+    let selected = |id: &str| a.ids.is_empty() || a.ids.iter().any(|i| i.eq_ignore_ascii_case(id));
+    let mut rows: Vec<Timing> = Vec::new();
+    match (a.modality, load(&input)?) {
+        (Modality::Camera, Loaded::Image(img, _)) => {
+            let frame = if (img.width, img.height) == (a.width, a.height) {
+                img
+            } else {
+                resize_bilinear(&img.view(), a.width, a.height)
+            };
+            eprintln!(
+                "camera bench on {} scaled to {}x{}, {} thread(s)",
+                input.display(),
+                a.width,
+                a.height,
+                a.threads
+            );
+            for e in of_modality(Modality::Camera).filter(|e| e.is_implemented() && selected(e.id))
+            {
+                for s in e.severities() {
+                    rows.push(
+                        pool.install(|| time_camera(e, s, 1, &frame.view(), a.frames))
+                            .with_context(|| format!("{} severity {s}", e.id))?,
+                    );
+                }
+            }
+        }
+        (Modality::Lidar, Loaded::Cloud(cloud, kind, _)) => {
+            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max, false)?;
+            eprintln!(
+                "lidar bench on {} ({} points), {} thread(s)",
+                input.display(),
+                cloud.len(),
+                a.threads
+            );
+            for e in of_modality(Modality::Lidar).filter(|e| e.is_implemented() && selected(e.id)) {
+                for s in e.severities() {
+                    rows.push(
+                        pool.install(|| time_lidar(e, s, 1, &sensor, &cloud.view(), a.frames))
+                            .with_context(|| format!("{} severity {s}", e.id))?,
+                    );
+                }
+            }
+        }
+        (m, _) => bail!(
+            "{} is not {} input",
+            input.display(),
+            if m == Modality::Camera {
+                "image"
+            } else {
+                "point-cloud"
+            }
+        ),
+    }
+    print_report(&rows, budget, if a.json { Format::Json } else { a.format })
+}
+
+fn print_report(rows: &[Timing], budget: f64, format: Format) -> Result<()> {
+    match format {
+        Format::Json => {
+            let out: Vec<Row<'_>> = rows
+                .iter()
+                .map(|t| Row {
+                    timing: t,
+                    budget_ms: budget,
+                    fits_budget: t.max_ms <= budget,
+                })
+                .collect();
+            println!("{}", serde_json::to_string_pretty(&out)?);
+        }
+        Format::Csv => {
+            println!(
+                "id,name,severity,frames,setup_ms,mean_ms,median_ms,p99_ms,max_ms,budget_ms,fits_budget"
+            );
+            for t in rows {
+                println!(
+                    "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{}",
+                    t.id,
+                    t.name,
+                    t.severity,
+                    t.frames,
+                    t.setup_ms,
+                    t.mean_ms,
+                    t.median_ms,
+                    t.p99_ms,
+                    t.max_ms,
+                    budget,
+                    t.max_ms <= budget
+                );
+            }
+        }
+        Format::Table | Format::Markdown => {
+            let md = format == Format::Markdown;
+            let mut ids: Vec<&'static str> = rows.iter().map(|t| t.id).collect();
+            ids.dedup();
+            if md {
+                println!(
+                    "| id | name | mean ms (avg over severities) | median ms (max over severities) | max ms | setup ms | fits {budget} ms |"
+                );
+                println!("|---|---|---:|---:|---:|---:|:---:|");
+            } else {
+                println!(
+                    "{:<7} {:<24} {:>9} {:>10} {:>9} {:>9}  fits {budget} ms",
+                    "id", "name", "mean_ms", "median_ms", "max_ms", "setup_ms"
+                );
+            }
+            let mut fits_all = 0;
+            for id in &ids {
+                let rs: Vec<&Timing> = rows.iter().filter(|t| t.id == *id).collect();
+                let mean = rs.iter().map(|t| t.mean_ms).sum::<f64>() / rs.len() as f64;
+                let med = rs.iter().map(|t| t.median_ms).fold(0.0, f64::max);
+                let max = rs.iter().map(|t| t.max_ms).fold(0.0, f64::max);
+                let setup = rs.iter().map(|t| t.setup_ms).fold(0.0, f64::max);
+                let fits = max <= budget;
+                fits_all += fits as usize;
+                let mark = if fits { "yes" } else { "NO" };
+                if md {
+                    println!(
+                        "| {} | {} | {mean:.2} | {med:.2} | {max:.2} | {setup:.1} | {mark} |",
+                        id, rs[0].name
+                    );
+                } else {
+                    println!(
+                        "{:<7} {:<24} {mean:>9.2} {med:>10.2} {max:>9.2} {setup:>9.1}  {mark}",
+                        id, rs[0].name
+                    );
+                }
+            }
+            let mut medians: Vec<f64> = rows.iter().map(|t| t.median_ms).collect();
+            medians.sort_by(f64::total_cmp);
+            let median = medians.get(medians.len() / 2).copied().unwrap_or(0.0);
+            println!(
+                "{}{fits_all}/{} perturbations fit {budget} ms at every severity; median over all rows {median:.2} ms",
+                if md { "\n" } else { "" },
+                ids.len()
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,104 @@
+//! Reading and writing the file formats, with the file name in every error.
+
+use anyhow::{Context, Result, bail};
+use perturb_core::cloud::{Cloud, CloudView};
+use perturb_core::formats::{FileKind, kitti, pcd, picture};
+use perturb_core::image::{Image, ImageView};
+use perturb_core::sensors::SensorModel;
+use std::path::Path;
+
+/// A decoded input file.
+pub enum Loaded {
+    /// An image and whether it was a JPEG.
+    Image(Image, FileKind),
+    /// A cloud, its file kind, and for PCD the data encoding and viewpoint.
+    Cloud(Cloud, FileKind, Option<(pcd::PcdData, [f64; 7])>),
+}
+
+/// Reads and decodes an image or point-cloud file.
+pub fn load(path: &Path) -> Result<Loaded> {
+    let kind = FileKind::from_path(path)?;
+    if kind == FileKind::Mcap {
+        bail!(
+            "{} is a bag; this operation needs an image or point-cloud file",
+            path.display()
+        );
+    }
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let ctx = || format!("{}", path.display());
+    Ok(match kind {
+        FileKind::Png | FileKind::Jpeg => {
+            Loaded::Image(picture::decode(&bytes).with_context(ctx)?, kind)
+        }
+        FileKind::KittiBin => {
+            Loaded::Cloud(kitti::decode_kitti(&bytes).with_context(ctx)?, kind, None)
+        }
+        FileKind::NuscenesBin => Loaded::Cloud(
+            kitti::decode_nuscenes(&bytes).with_context(ctx)?,
+            kind,
+            None,
+        ),
+        FileKind::Pcd => {
+            let f = pcd::decode(&bytes).with_context(ctx)?;
+            Loaded::Cloud(f.cloud, kind, Some((f.data, f.viewpoint)))
+        }
+        FileKind::Mcap => unreachable!("handled above"),
+    })
+}
+
+/// Encodes and writes an image in `kind`'s format.
+pub fn save_image(path: &Path, img: &ImageView<'_>, kind: FileKind) -> Result<()> {
+    let bytes = match kind {
+        FileKind::Jpeg => picture::encode_jpeg(img, 95)?,
+        _ => picture::encode_png(img)?,
+    };
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Encodes and writes a cloud in `kind`'s format (PCD keeps its data encoding and viewpoint).
+pub fn save_cloud(
+    path: &Path,
+    cloud: &CloudView<'_>,
+    kind: FileKind,
+    pcd_meta: Option<(pcd::PcdData, [f64; 7])>,
+) -> Result<()> {
+    let bytes = match kind {
+        FileKind::KittiBin => kitti::encode_kitti(cloud)?,
+        FileKind::NuscenesBin => kitti::encode_nuscenes(cloud)?,
+        _ => {
+            let (data, vp) =
+                pcd_meta.unwrap_or((pcd::PcdData::Binary, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]));
+            pcd::encode(cloud, data, vp)?
+        }
+    };
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// The sensor model for a cloud file: `--sensor` if given, else HDL-64E for KITTI `.bin` files
+/// (KITTI's sensor, reflectance 0..1) and VLP-32C (intensity 0..255) for everything else;
+/// `--intensity-max` overrides the intensity scale. The choice is printed, never silent.
+pub fn sensor_for(
+    kind: Option<FileKind>,
+    sensor: Option<&str>,
+    intensity_max: Option<f32>,
+    quiet: bool,
+) -> Result<SensorModel> {
+    let mut m = match sensor {
+        Some(name) => SensorModel::by_name(name)?,
+        None if kind == Some(FileKind::KittiBin) => SensorModel::hdl64e(),
+        None => SensorModel::vlp32c(),
+    };
+    if let Some(max) = intensity_max {
+        if max != 1.0 && max != 255.0 {
+            bail!("--intensity-max must be 1 or 255, not {max}");
+        }
+        m = m.with_intensity_max(max);
+    }
+    if !quiet {
+        eprintln!(
+            "sensor model {} (intensity full scale {}); change with --sensor / --intensity-max",
+            m.name, m.intensity_max
+        );
+    }
+    Ok(m)
+}

@@ -1,0 +1,71 @@
+//! `perturb list`.
+
+use perturb_core::registry::{CATALOGUE, Modality};
+
+/// Arguments of `perturb list`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Print a JSON array (id, name, modality, family, severities, description, reference, implemented).
+    #[arg(long)]
+    json: bool,
+    /// Only this modality: camera or lidar.
+    #[arg(long)]
+    modality: Option<Modality>,
+}
+
+#[derive(serde::Serialize)]
+struct Row {
+    id: &'static str,
+    name: &'static str,
+    modality: Modality,
+    family: &'static str,
+    severities: Vec<u8>,
+    description: &'static str,
+    reference: &'static str,
+    implemented: bool,
+}
+
+/// Prints the catalogue.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let rows: Vec<Row> = CATALOGUE
+        .iter()
+        .filter(|e| args.modality.is_none_or(|m| m == e.modality))
+        .map(|e| Row {
+            id: e.id,
+            name: e.name,
+            modality: e.modality,
+            family: e.family,
+            severities: e.severities().collect(),
+            description: e.description,
+            reference: e.reference,
+            implemented: e.is_implemented(),
+        })
+        .collect();
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "{:<6} {:<24} {:<7} {:<11} {:<5} description",
+        "id", "name", "sensor", "family", "sev"
+    );
+    for r in &rows {
+        let sev = format!("1-{}", r.severities.len());
+        let mark = if r.implemented {
+            ""
+        } else {
+            "  [not in this build]"
+        };
+        println!(
+            "{:<6} {:<24} {:<7} {:<11} {:<5} {}{}",
+            r.id,
+            r.name,
+            r.modality.as_str(),
+            r.family,
+            sev,
+            r.description,
+            mark
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,67 @@
+//! `perturb`: the command-line face of the perturbation middleware.
+//!
+//! Every subcommand is a thin layer over the library crates: `perturb-core` does the work,
+//! `perturb-bag` reads and writes bags. Errors go to stderr with a non-zero exit status.
+
+mod apply;
+mod bench;
+mod demo;
+mod files;
+mod info;
+mod list;
+
+use clap::{Parser, Subcommand};
+
+/// Camera and LiDAR perturbations for testing autonomous driving systems under sensor degradation.
+///
+/// The same perturbations run live in the `perturbd` daemon (between the sensor drivers and the
+/// ADS), in hardware-in-the-loop bag replay, and offline on files through this tool. With the same
+/// seed and sequence number, `perturb apply` reproduces byte for byte what the daemon injected.
+#[derive(Parser)]
+#[command(
+    name = "perturb",
+    version,
+    about,
+    long_about,
+    arg_required_else_help = true
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// List the catalogue of perturbations (IDs, names, modality, family, severities).
+    List(list::Args),
+    /// Perturb one image, point cloud or bag file.
+    Apply(apply::Args),
+    /// Show what a file holds (image, point cloud, or a bag's topics) and check that it decodes.
+    Info(info::Args),
+    /// Run the product on synthetic camera and LiDAR data it generates itself.
+    Demo(demo::Args),
+    /// Time every perturbation at every severity on a real frame or scan and check the budget.
+    Bench(bench::Args),
+}
+
+fn main() {
+    // Behave like a Unix tool when the reader of stdout goes away (`perturb list | head`):
+    // exit quietly instead of panicking on a broken pipe.
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread is started.
+    #[cfg(unix)]
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::List(a) => list::run(a),
+        Command::Apply(a) => apply::run(a),
+        Command::Info(a) => info::run(a),
+        Command::Bench(a) => bench::run(a),
+        Command::Demo(a) => demo::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
