@@ -19,6 +19,7 @@ pub mod error;
 pub mod formats;
 pub mod image;
 pub mod lidar;
+pub mod metrics;
 pub mod perturber;
 pub mod registry;
 pub mod rng;
