@@ -25,5 +25,6 @@ pub mod registry;
 pub mod rng;
 pub mod sensors;
 pub mod synthetic;
+pub mod viz;
 
 pub use error::{Error, Result};

@@ -77,7 +77,11 @@ fn ground_distance(a: &Box3, b: &Box3) -> f32 {
 
 /// Matches `perturbed` boxes to `baseline` boxes (greedy by increasing centre distance,
 /// one-to-one) and returns the retention and translation error.
-pub fn detection_metrics(baseline: &[Box3], perturbed: &[Box3], cfg: &MatchConfig) -> DetectionMetrics {
+pub fn detection_metrics(
+    baseline: &[Box3],
+    perturbed: &[Box3],
+    cfg: &MatchConfig,
+) -> DetectionMetrics {
     let mut pairs: Vec<(f32, usize, usize)> = Vec::new();
     for (i, b) in baseline.iter().enumerate() {
         for (j, p) in perturbed.iter().enumerate() {
@@ -134,8 +138,12 @@ fn jitter(v: &[f64]) -> f64 {
 
 /// Compares predictions frame by frame. Both lists are `(frame, value)`; frames are matched by
 /// key, in the baseline's order. Every baseline frame must have a perturbed prediction.
-pub fn steering_metrics(baseline: &[(String, f64)], perturbed: &[(String, f64)]) -> Result<SteeringMetrics> {
-    let index: std::collections::HashMap<&str, f64> = perturbed.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+pub fn steering_metrics(
+    baseline: &[(String, f64)],
+    perturbed: &[(String, f64)],
+) -> Result<SteeringMetrics> {
+    let index: std::collections::HashMap<&str, f64> =
+        perturbed.iter().map(|(k, v)| (k.as_str(), *v)).collect();
     let mut b = Vec::with_capacity(baseline.len());
     let mut p = Vec::with_capacity(baseline.len());
     for (k, v) in baseline {
@@ -177,7 +185,11 @@ pub fn summarize_lidar(per_severity: &[DetectionMetrics]) -> LidarSummary {
     let n = per_severity.len().max(1) as f64;
     LidarSummary {
         avg_retention: per_severity.iter().map(|m| m.retention).sum::<f64>() / n,
-        min_retention: per_severity.iter().map(|m| m.retention).fold(f64::INFINITY, f64::min).min(1.0),
+        min_retention: per_severity
+            .iter()
+            .map(|m| m.retention)
+            .fold(f64::INFINITY, f64::min)
+            .min(1.0),
         max_ate: per_severity.iter().filter_map(|m| m.ate).reduce(f64::max),
     }
 }
@@ -199,7 +211,10 @@ pub fn summarize_camera(per_severity: &[SteeringMetrics]) -> CameraSummary {
     CameraSummary {
         avg_mse: per_severity.iter().map(|m| m.mse).sum::<f64>() / n,
         max_mse: per_severity.iter().map(|m| m.mse).fold(0.0, f64::max),
-        max_abs_deviation: per_severity.iter().map(|m| m.max_abs_deviation).fold(0.0, f64::max),
+        max_abs_deviation: per_severity
+            .iter()
+            .map(|m| m.max_abs_deviation)
+            .fold(0.0, f64::max),
     }
 }
 
@@ -232,7 +247,10 @@ mod tests {
         let pert = [b(10.9, 0.0)];
         let m = detection_metrics(&base, &pert, &MatchConfig::default());
         assert_eq!(m.retained, 1);
-        assert!((m.ate.unwrap() - 0.1).abs() < 1e-5, "the nearer baseline box wins");
+        assert!(
+            (m.ate.unwrap() - 0.1).abs() < 1e-5,
+            "the nearer baseline box wins"
+        );
         let none = detection_metrics(&[], &pert, &MatchConfig::default());
         assert_eq!(none.retention, 1.0);
         assert_eq!(none.ate, None);
@@ -241,11 +259,22 @@ mod tests {
     #[test]
     fn pooling_and_summaries() {
         let mut total = DetectionMetrics::default();
-        total.add(&detection_metrics(&[b(0.0, 0.0)], &[b(1.0, 0.0)], &MatchConfig::default()));
-        total.add(&detection_metrics(&[b(0.0, 0.0)], &[], &MatchConfig::default()));
+        total.add(&detection_metrics(
+            &[b(0.0, 0.0)],
+            &[b(1.0, 0.0)],
+            &MatchConfig::default(),
+        ));
+        total.add(&detection_metrics(
+            &[b(0.0, 0.0)],
+            &[],
+            &MatchConfig::default(),
+        ));
         assert_eq!((total.baseline, total.retained), (2, 1));
         assert!((total.retention - 0.5).abs() < 1e-12);
-        let s = summarize_lidar(&[total, detection_metrics(&[b(0.0, 0.0)], &[b(0.0, 0.0)], &MatchConfig::default())]);
+        let s = summarize_lidar(&[
+            total,
+            detection_metrics(&[b(0.0, 0.0)], &[b(0.0, 0.0)], &MatchConfig::default()),
+        ]);
         assert!((s.avg_retention - 0.75).abs() < 1e-12);
         assert_eq!(s.min_retention, 0.5);
         assert!((s.max_ate.unwrap() - 1.0).abs() < 1e-6);
@@ -253,8 +282,16 @@ mod tests {
 
     #[test]
     fn steering_hand_computed() {
-        let base: Vec<(String, f64)> = [0.0, 0.1, 0.2, 0.1].iter().enumerate().map(|(i, v)| (i.to_string(), *v)).collect();
-        let pert: Vec<(String, f64)> = [0.1, 0.1, -0.1, 0.1].iter().enumerate().map(|(i, v)| (i.to_string(), *v)).collect();
+        let base: Vec<(String, f64)> = [0.0, 0.1, 0.2, 0.1]
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i.to_string(), *v))
+            .collect();
+        let pert: Vec<(String, f64)> = [0.1, 0.1, -0.1, 0.1]
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i.to_string(), *v))
+            .collect();
         let m = steering_metrics(&base, &pert).unwrap();
         // diffs 0.1, 0, -0.3, 0 -> mse (0.01 + 0.09) / 4 = 0.025
         assert!((m.mse - 0.025).abs() < 1e-12);
@@ -263,7 +300,14 @@ mod tests {
         assert!((m.jitter_perturbed - (0.0 + 0.2 + 0.2) / 3.0).abs() < 1e-12);
         let err = steering_metrics(&base, &pert[..2]).unwrap_err();
         assert!(err.to_string().contains("frame `2`"), "{err}");
-        let s = summarize_camera(&[m, SteeringMetrics { mse: 0.075, max_abs_deviation: 0.1, ..m }]);
+        let s = summarize_camera(&[
+            m,
+            SteeringMetrics {
+                mse: 0.075,
+                max_abs_deviation: 0.1,
+                ..m
+            },
+        ]);
         assert!((s.avg_mse - 0.05).abs() < 1e-12 && s.max_mse == 0.075);
         assert!((s.max_abs_deviation - 0.3).abs() < 1e-12);
     }

@@ -109,10 +109,39 @@ pub fn run(a: Args) -> Result<()> {
 
 fn apply_bag(a: &Args, spec: Spec) -> Result<()> {
     let bag = Bag::open(&a.input)?;
-    let topics = bag.topics()?;
-    let mut w = BagWriter::create(&a.output, &WriterOptions::default())?;
+    let sensor = sensor_for(None, a.sensor.as_deref(), a.intensity_max, false)?;
+    perturb_bag(
+        &bag,
+        &a.output,
+        spec,
+        a.seq,
+        &sensor,
+        &a.topic,
+        false,
+        &|| {},
+    )?;
+    Ok(())
+}
+
+/// Writes a copy of `bag` into the bag directory `out` with every message of the perturbation's
+/// modality (on `topics`, or all topics when empty) perturbed, the others copied, and a
+/// /perturb/events record per perturbed frame. The sequence number of a message is its index on its
+/// topic plus `seq_offset`. Returns the number of input messages; damage in the input is an error
+/// after the readable messages were written. `tick` is called once per input message.
+#[allow(clippy::too_many_arguments)]
+pub fn perturb_bag(
+    bag: &Bag,
+    out: &std::path::Path,
+    spec: Spec,
+    seq_offset: u64,
+    sensor: &perturb_core::sensors::SensorModel,
+    topics: &[String],
+    quiet: bool,
+    tick: &(dyn Fn() + Sync),
+) -> Result<u64> {
+    let mut w = BagWriter::create(out, &WriterOptions::default())?;
     let mut channel = HashMap::new();
-    for t in &topics {
+    for t in &bag.topics()? {
         let id = w.add_topic_with_schema(
             &t.topic,
             &t.type_name,
@@ -128,22 +157,20 @@ fn apply_bag(a: &Args, spec: Spec) -> Result<()> {
         Modality::Lidar => None,
     };
     let mut lidar = match spec.entry.modality {
-        Modality::Lidar => Some(LidarPerturber::from_spec(
-            spec,
-            sensor_for(None, a.sensor.as_deref(), a.intensity_max, false)?,
-        )?),
+        Modality::Lidar => Some(LidarPerturber::from_spec(spec, sensor.clone())?),
         Modality::Camera => None,
     };
     let mut index: HashMap<String, u64> = HashMap::new();
     let mut perturbed: HashMap<String, u64> = HashMap::new();
     let report = bag.for_each(&Filter::default(), |m| {
+        tick();
         let ch = channel[m.topic];
-        let selected = a.topic.is_empty() || a.topic.iter().any(|t| t == m.topic);
+        let selected = topics.is_empty() || topics.iter().any(|t| t == m.topic);
         let decoded = if selected { m.decode() } else { None };
         let (bytes, header) = match decoded {
             Some(Ok(msg)) => {
                 let k = index.entry(m.topic.to_string()).or_default();
-                let seq = *k + a.seq;
+                let seq = *k + seq_offset;
                 *k += 1;
                 let out =
                     perturb_message(&msg, seq, camera.as_mut(), lidar.as_mut()).map_err(|e| {
@@ -182,28 +209,30 @@ fn apply_bag(a: &Args, spec: Spec) -> Result<()> {
         Ok(ControlFlow::Continue(()))
     })?;
     let dir = w.finish()?;
-    for (t, n) in &perturbed {
+    if !quiet {
+        for (t, n) in &perturbed {
+            eprintln!(
+                "{t}: {n} messages perturbed with {} severity {}",
+                spec.entry.id, spec.severity
+            );
+        }
+        if perturbed.is_empty() {
+            eprintln!(
+                "warning: no {} message found to perturb",
+                spec.entry.modality
+            );
+        }
+        let events: u64 = perturbed.values().sum();
         eprintln!(
-            "{t}: {n} messages perturbed with {} severity {}",
-            spec.entry.id, spec.severity
+            "{} messages of the input and {events} /perturb/events records written to {}",
+            report.delivered,
+            dir.display()
         );
     }
-    if perturbed.is_empty() {
-        eprintln!(
-            "warning: no {} message found to perturb",
-            spec.entry.modality
-        );
-    }
-    let events: u64 = perturbed.values().sum();
-    eprintln!(
-        "{} messages of the input and {events} /perturb/events records written to {}",
-        report.delivered,
-        dir.display()
-    );
     if let Some(d) = report.damage {
         bail!("the input bag is damaged; the messages before the damage were written: {d}");
     }
-    Ok(())
+    Ok(report.delivered)
 }
 
 type HeaderOut = (i32, u32, String);

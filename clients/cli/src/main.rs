@@ -4,9 +4,13 @@
 //! `perturb-bag` reads and writes bags. Errors go to stderr with a non-zero exit status.
 
 mod apply;
+mod augment;
+mod batch;
 mod bench;
+mod dataset;
 mod demo;
 mod files;
+mod gallery;
 mod info;
 mod list;
 
@@ -36,6 +40,12 @@ enum Command {
     List(list::Args),
     /// Perturb one image, point cloud or bag file.
     Apply(apply::Args),
+    /// Apply perturbations at every severity to a whole dataset (folder of images or scans, or a bag).
+    Batch(batch::Args),
+    /// Render every perturbation at every severity on one frame or scan (bird's-eye views for LiDAR).
+    Gallery(gallery::Args),
+    /// Write one randomly drawn perturbed variant per training sample, with a manifest.
+    Augment(augment::Args),
     /// Show what a file holds (image, point cloud, or a bag's topics) and check that it decodes.
     Info(info::Args),
     /// Run the product on synthetic camera and LiDAR data it generates itself.
@@ -56,6 +66,9 @@ fn main() {
     let result = match cli.command {
         Command::List(a) => list::run(a),
         Command::Apply(a) => apply::run(a),
+        Command::Batch(a) => batch::run(a),
+        Command::Gallery(a) => gallery::run(a),
+        Command::Augment(a) => augment::run(a),
         Command::Info(a) => info::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Demo(a) => demo::run(a),
