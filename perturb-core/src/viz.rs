@@ -325,6 +325,6 @@ mod tests {
         let sheet = contact_sheet("T", &[vec![cell(10), cell(200)], vec![cell(90)]], 80);
         assert_eq!(sheet.width, 2 * 84 + 4);
         assert_eq!(sheet.height, 24 + 2 * (60 + 14 + 4) + 4);
-        assert!(sheet.data.iter().any(|&b| b == 200));
+        assert!(sheet.data.contains(&200));
     }
 }
