@@ -13,6 +13,7 @@ mod files;
 mod gallery;
 mod info;
 mod list;
+mod metrics;
 
 use clap::{Parser, Subcommand};
 
@@ -46,6 +47,8 @@ enum Command {
     Gallery(gallery::Args),
     /// Write one randomly drawn perturbed variant per training sample, with a manifest.
     Augment(augment::Args),
+    /// The study's metric tables (steering MSE and deviation; detection retention and ATE).
+    Metrics(metrics::Args),
     /// Show what a file holds (image, point cloud, or a bag's topics) and check that it decodes.
     Info(info::Args),
     /// Run the product on synthetic camera and LiDAR data it generates itself.
@@ -69,6 +72,7 @@ fn main() {
         Command::Batch(a) => batch::run(a),
         Command::Gallery(a) => gallery::run(a),
         Command::Augment(a) => augment::run(a),
+        Command::Metrics(a) => metrics::run(a),
         Command::Info(a) => info::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Demo(a) => demo::run(a),
