@@ -38,11 +38,29 @@ fn shared(test: &str) -> Option<PathBuf> {
     }
 }
 
-fn tmp(name: &str) -> PathBuf {
+/// A scratch directory removed when the test ends (kept when PERTURB_KEEP_TEST_FILES is set).
+struct Tmp(PathBuf);
+
+impl Drop for Tmp {
+    fn drop(&mut self) {
+        if std::env::var_os("PERTURB_KEEP_TEST_FILES").is_none() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+impl std::ops::Deref for Tmp {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+fn tmp(name: &str) -> Tmp {
     let d = std::env::temp_dir().join(format!("perturb-cli-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
-    d
+    Tmp(d)
 }
 
 /// Runs a Python check script if the oracle packages are installed; fails when they are required
