@@ -177,676 +177,93 @@ macro_rules! entry {
 use Builder::Missing;
 
 /// Every perturbation, camera first, in ID order.
+#[rustfmt::skip]
 pub static CATALOGUE: &[Entry] = &[
     // ---- Camera: noise
-    entry!(
-        "C-A1",
-        "gaussian_noise",
-        Camera,
-        "noise",
-        Builder::Camera(camera::noise::GAUSSIAN),
-        "PerturbationDrive gaussian_noise",
-        "Additive zero-mean Gaussian sensor noise on every channel"
-    ),
-    entry!(
-        "C-A2",
-        "poisson_noise",
-        Camera,
-        "noise",
-        Missing,
-        "PerturbationDrive poisson_noise",
-        "Photon shot noise: each value drawn from a Poisson law around itself"
-    ),
-    entry!(
-        "C-A3",
-        "impulse_noise",
-        Camera,
-        "noise",
-        Missing,
-        "PerturbationDrive impulse_noise",
-        "Salt-and-pepper specks on random pixel channels"
-    ),
-    entry!(
-        "C-A4",
-        "jpeg_compression",
-        Camera,
-        "noise",
-        Missing,
-        "PerturbationDrive jpeg_filter",
-        "JPEG block and ringing artefacts at low quality"
-    ),
-    entry!(
-        "C-A5",
-        "speckle_noise",
-        Camera,
-        "noise",
-        Missing,
-        "PerturbationDrive speckle_noise_filter",
-        "Multiplicative Gaussian speckle noise"
-    ),
+    entry!("C-A1", "gaussian_noise", Camera, "noise", Builder::Camera(camera::noise::GAUSSIAN), "PerturbationDrive gaussian_noise", "Additive zero-mean Gaussian sensor noise on every channel"),
+    entry!("C-A2", "poisson_noise", Camera, "noise", Builder::Camera(camera::noise::POISSON), "PerturbationDrive poisson_noise", "Photon shot noise: each value drawn from a Poisson law around itself"),
+    entry!("C-A3", "impulse_noise", Camera, "noise", Builder::Camera(camera::noise::IMPULSE), "PerturbationDrive impulse_noise", "Salt-and-pepper specks on random pixel channels"),
+    entry!("C-A4", "jpeg_compression", Camera, "noise", Builder::Camera(camera::noise::JPEG), "PerturbationDrive jpeg_filter", "JPEG block and ringing artefacts at low quality"),
+    entry!("C-A5", "speckle_noise", Camera, "noise", Builder::Camera(camera::noise::SPECKLE), "PerturbationDrive speckle_noise_filter", "Multiplicative Gaussian speckle noise"),
     // ---- Camera: blur
-    entry!(
-        "C-B1",
-        "defocus_blur",
-        Camera,
-        "blur",
-        Missing,
-        "PerturbationDrive defocus_blur",
-        "Out-of-focus lens: convolution with a disk"
-    ),
-    entry!(
-        "C-B2",
-        "glass_blur",
-        Camera,
-        "blur",
-        Missing,
-        "PerturbationDrive glass_blur",
-        "Frosted-glass look: each pixel taken from a random neighbour"
-    ),
-    entry!(
-        "C-B3",
-        "motion_blur",
-        Camera,
-        "blur",
-        Missing,
-        "PerturbationDrive motion_blur",
-        "Camera shake: convolution with a slanted line kernel"
-    ),
-    entry!(
-        "C-B4",
-        "zoom_blur",
-        Camera,
-        "blur",
-        Missing,
-        "PerturbationDrive zoom_blur",
-        "Radial blur of a fast forward motion: average of zoomed copies"
-    ),
-    entry!(
-        "C-B5",
-        "gaussian_blur",
-        Camera,
-        "blur",
-        Builder::Camera(camera::blur::GAUSSIAN),
-        "PerturbationDrive gaussian_blur",
-        "Soft focus: Gaussian blur with a growing kernel"
-    ),
-    entry!(
-        "C-B6",
-        "low_pass",
-        Camera,
-        "blur",
-        Missing,
-        "PerturbationDrive low_pass_filter",
-        "Gaussian low-pass on the brightness channel only"
-    ),
-    entry!(
-        "C-B7",
-        "high_pass",
-        Camera,
-        "blur",
-        Missing,
-        "PerturbationDrive high_pass_filter",
-        "Unsharp-mask high-pass emphasis of edges and noise"
-    ),
+    entry!("C-B1", "defocus_blur", Camera, "blur", Missing, "PerturbationDrive defocus_blur", "Out-of-focus lens: convolution with a disk"),
+    entry!("C-B2", "glass_blur", Camera, "blur", Missing, "PerturbationDrive glass_blur", "Frosted-glass look: each pixel taken from a random neighbour"),
+    entry!("C-B3", "motion_blur", Camera, "blur", Missing, "PerturbationDrive motion_blur", "Camera shake: convolution with a slanted line kernel"),
+    entry!("C-B4", "zoom_blur", Camera, "blur", Missing, "PerturbationDrive zoom_blur", "Radial blur of a fast forward motion: average of zoomed copies"),
+    entry!("C-B5", "gaussian_blur", Camera, "blur", Builder::Camera(camera::blur::GAUSSIAN), "PerturbationDrive gaussian_blur", "Soft focus: Gaussian blur with a growing kernel"),
+    entry!("C-B6", "low_pass", Camera, "blur", Missing, "PerturbationDrive low_pass_filter", "Gaussian low-pass on the brightness channel only"),
+    entry!("C-B7", "high_pass", Camera, "blur", Missing, "PerturbationDrive high_pass_filter", "Unsharp-mask high-pass emphasis of edges and noise"),
     // ---- Camera: weather and illumination
-    entry!(
-        "C-C1",
-        "frost",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive frost_filter",
-        "Ice crystals on the lens (procedural frost texture)"
-    ),
-    entry!(
-        "C-C2",
-        "snow",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive snow_filter",
-        "Snow layer over the scene (procedural snow texture)"
-    ),
-    entry!(
-        "C-C3",
-        "fog",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive fog_mapping",
-        "Fog: blend with a fractal (diamond-square) haze"
-    ),
-    entry!(
-        "C-C4",
-        "brightness_increase",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive increase_brightness",
-        "Over-exposure: HSV value scaled up"
-    ),
-    entry!(
-        "C-C5",
-        "brightness_decrease",
-        Camera,
-        "weather",
-        Missing,
-        "mirror of increase_brightness",
-        "Under-exposure: HSV value scaled down"
-    ),
-    entry!(
-        "C-C6",
-        "contrast",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive contrast",
-        "Contrast stretched around mid-grey"
-    ),
-    entry!(
-        "C-C7",
-        "rain",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive dynamic_rain_filter",
-        "Falling rain streaks (procedural, animated)"
-    ),
-    entry!(
-        "C-C8",
-        "raindrops",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive effects_rain_dynamic",
-        "Refracting water drops on the windshield (animated)"
-    ),
-    entry!(
-        "C-C9",
-        "lightning",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive dynamic_lightning_filter",
-        "Lightning bolts and flashes (procedural, animated)"
-    ),
-    entry!(
-        "C-C10",
-        "smoke",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive dynamic_smoke_filter",
-        "Drifting smoke clouds (procedural, animated)"
-    ),
-    entry!(
-        "C-C11",
-        "sun_glare",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive dynamic_sun_filter",
-        "Sun glare with streak and lens ghosts (procedural, animated)"
-    ),
-    entry!(
-        "C-C12",
-        "snowflakes",
-        Camera,
-        "weather",
-        Missing,
-        "PerturbationDrive effects_snowflake_dynamic",
-        "Snowflakes rushing past while driving (particles, animated)"
-    ),
+    entry!("C-C1", "frost", Camera, "weather", Missing, "PerturbationDrive frost_filter", "Ice crystals on the lens (procedural frost texture)"),
+    entry!("C-C2", "snow", Camera, "weather", Missing, "PerturbationDrive snow_filter", "Snow layer over the scene (procedural snow texture)"),
+    entry!("C-C3", "fog", Camera, "weather", Missing, "PerturbationDrive fog_mapping", "Fog: blend with a fractal (diamond-square) haze"),
+    entry!("C-C4", "brightness_increase", Camera, "weather", Missing, "PerturbationDrive increase_brightness", "Over-exposure: HSV value scaled up"),
+    entry!("C-C5", "brightness_decrease", Camera, "weather", Missing, "mirror of increase_brightness", "Under-exposure: HSV value scaled down"),
+    entry!("C-C6", "contrast", Camera, "weather", Missing, "PerturbationDrive contrast", "Contrast stretched around mid-grey"),
+    entry!("C-C7", "rain", Camera, "weather", Missing, "PerturbationDrive dynamic_rain_filter", "Falling rain streaks (procedural, animated)"),
+    entry!("C-C8", "raindrops", Camera, "weather", Missing, "PerturbationDrive effects_rain_dynamic", "Refracting water drops on the windshield (animated)"),
+    entry!("C-C9", "lightning", Camera, "weather", Missing, "PerturbationDrive dynamic_lightning_filter", "Lightning bolts and flashes (procedural, animated)"),
+    entry!("C-C10", "smoke", Camera, "weather", Missing, "PerturbationDrive dynamic_smoke_filter", "Drifting smoke clouds (procedural, animated)"),
+    entry!("C-C11", "sun_glare", Camera, "weather", Missing, "PerturbationDrive dynamic_sun_filter", "Sun glare with streak and lens ghosts (procedural, animated)"),
+    entry!("C-C12", "snowflakes", Camera, "weather", Missing, "PerturbationDrive effects_snowflake_dynamic", "Snowflakes rushing past while driving (particles, animated)"),
     // ---- Camera: distortion
-    entry!(
-        "C-D1",
-        "elastic",
-        Camera,
-        "distortion",
-        Missing,
-        "PerturbationDrive elastic",
-        "Elastic pixel jitter from a smoothed random displacement field"
-    ),
-    entry!(
-        "C-D2",
-        "pixelate",
-        Camera,
-        "distortion",
-        Missing,
-        "PerturbationDrive pixelate",
-        "Low-resolution blocks: downscale then nearest upscale"
-    ),
-    entry!(
-        "C-D3",
-        "sample_pairing",
-        Camera,
-        "distortion",
-        Missing,
-        "PerturbationDrive sample_pairing_filter",
-        "Blend with an enlarged random crop of the same frame"
-    ),
-    entry!(
-        "C-D4",
-        "sharpen",
-        Camera,
-        "distortion",
-        Missing,
-        "PerturbationDrive sharpen_filter",
-        "Over-sharpening with an unnormalised Laplacian kernel"
-    ),
+    entry!("C-D1", "elastic", Camera, "distortion", Missing, "PerturbationDrive elastic", "Elastic pixel jitter from a smoothed random displacement field"),
+    entry!("C-D2", "pixelate", Camera, "distortion", Missing, "PerturbationDrive pixelate", "Low-resolution blocks: downscale then nearest upscale"),
+    entry!("C-D3", "sample_pairing", Camera, "distortion", Missing, "PerturbationDrive sample_pairing_filter", "Blend with an enlarged random crop of the same frame"),
+    entry!("C-D4", "sharpen", Camera, "distortion", Missing, "PerturbationDrive sharpen_filter", "Over-sharpening with an unnormalised Laplacian kernel"),
     // ---- Camera: patterns
-    entry!(
-        "C-E1",
-        "splatter",
-        Camera,
-        "pattern",
-        Missing,
-        "PerturbationDrive splatter_mapping",
-        "Black blobs of dirt on the lens"
-    ),
-    entry!(
-        "C-E2",
-        "dotted_lines",
-        Camera,
-        "pattern",
-        Missing,
-        "PerturbationDrive dotted_lines_mapping",
-        "Dotted black lines across the image"
-    ),
-    entry!(
-        "C-E3",
-        "zigzag",
-        Camera,
-        "pattern",
-        Missing,
-        "PerturbationDrive zigzag_mapping",
-        "Zig-zag black scratches"
-    ),
-    entry!(
-        "C-E4",
-        "canny_edges",
-        Camera,
-        "pattern",
-        Missing,
-        "PerturbationDrive canny_edges_mapping",
-        "Canny edge overlay on a dimmed image"
-    ),
-    entry!(
-        "C-E5",
-        "cutout",
-        Camera,
-        "pattern",
-        Missing,
-        "PerturbationDrive cutout_filter",
-        "Black rectangles occluding parts of the image"
-    ),
-    entry!(
-        "C-E6",
-        "object_overlay",
-        Camera,
-        "pattern",
-        Missing,
-        "PerturbationDrive object_overlay",
-        "An opaque object (sticker, sign) covering the centre"
-    ),
+    entry!("C-E1", "splatter", Camera, "pattern", Missing, "PerturbationDrive splatter_mapping", "Black blobs of dirt on the lens"),
+    entry!("C-E2", "dotted_lines", Camera, "pattern", Missing, "PerturbationDrive dotted_lines_mapping", "Dotted black lines across the image"),
+    entry!("C-E3", "zigzag", Camera, "pattern", Missing, "PerturbationDrive zigzag_mapping", "Zig-zag black scratches"),
+    entry!("C-E4", "canny_edges", Camera, "pattern", Missing, "PerturbationDrive canny_edges_mapping", "Canny edge overlay on a dimmed image"),
+    entry!("C-E5", "cutout", Camera, "pattern", Missing, "PerturbationDrive cutout_filter", "Black rectangles occluding parts of the image"),
+    entry!("C-E6", "object_overlay", Camera, "pattern", Missing, "PerturbationDrive object_overlay", "An opaque object (sticker, sign) covering the centre"),
     // ---- Camera: colour and tone
-    entry!(
-        "C-F1",
-        "false_color",
-        Camera,
-        "color",
-        Missing,
-        "PerturbationDrive false_color_filter",
-        "Channel swaps, inversion and channel mixing"
-    ),
-    entry!(
-        "C-F2",
-        "phase_scrambling",
-        Camera,
-        "color",
-        Missing,
-        "PerturbationDrive phase_scrambling",
-        "Fourier phase noise that keeps the power spectrum"
-    ),
-    entry!(
-        "C-F3",
-        "histogram_equalization",
-        Camera,
-        "color",
-        Missing,
-        "PerturbationDrive histogram_equalisation",
-        "CLAHE on brightness: local contrast boost"
-    ),
-    entry!(
-        "C-F4",
-        "white_balance",
-        Camera,
-        "color",
-        Missing,
-        "PerturbationDrive white_balance_filter",
-        "Gray-world white balance shift"
-    ),
-    entry!(
-        "C-F5",
-        "grayscale",
-        Camera,
-        "color",
-        Builder::Camera(camera::color::GRAYSCALE),
-        "PerturbationDrive grayscale_filter",
-        "Colour loss: blend towards the BT.601 luma"
-    ),
-    entry!(
-        "C-F6",
-        "saturation_increase",
-        Camera,
-        "color",
-        Missing,
-        "PerturbationDrive saturation_filter",
-        "Over-saturated colours: HSV saturation scaled up"
-    ),
-    entry!(
-        "C-F7",
-        "posterize",
-        Camera,
-        "color",
-        Missing,
-        "PerturbationDrive posterize_filter",
-        "Fewer intensity levels per channel"
-    ),
-    entry!(
-        "C-F8",
-        "saturation_decrease",
-        Camera,
-        "color",
-        Missing,
-        "PerturbationDrive saturation_decrease_filter",
-        "Washed-out colours: HSV saturation scaled down"
-    ),
+    entry!("C-F1", "false_color", Camera, "color", Missing, "PerturbationDrive false_color_filter", "Channel swaps, inversion and channel mixing"),
+    entry!("C-F2", "phase_scrambling", Camera, "color", Missing, "PerturbationDrive phase_scrambling", "Fourier phase noise that keeps the power spectrum"),
+    entry!("C-F3", "histogram_equalization", Camera, "color", Missing, "PerturbationDrive histogram_equalisation", "CLAHE on brightness: local contrast boost"),
+    entry!("C-F4", "white_balance", Camera, "color", Missing, "PerturbationDrive white_balance_filter", "Gray-world white balance shift"),
+    entry!("C-F5", "grayscale", Camera, "color", Builder::Camera(camera::color::GRAYSCALE), "PerturbationDrive grayscale_filter", "Colour loss: blend towards the BT.601 luma"),
+    entry!("C-F6", "saturation_increase", Camera, "color", Missing, "PerturbationDrive saturation_filter", "Over-saturated colours: HSV saturation scaled up"),
+    entry!("C-F7", "posterize", Camera, "color", Missing, "PerturbationDrive posterize_filter", "Fewer intensity levels per channel"),
+    entry!("C-F8", "saturation_decrease", Camera, "color", Missing, "PerturbationDrive saturation_decrease_filter", "Washed-out colours: HSV saturation scaled down"),
     // ---- LiDAR: weather
-    entry!(
-        "L-A1",
-        "snow_lisa",
-        Lidar,
-        "weather",
-        Missing,
-        "3D-Corruptions-AD snow_sim (LISA, Marshall-Gunn)",
-        "Snowfall by Monte-Carlo scattering of each beam on ice particles (LISA)"
-    ),
-    entry!(
-        "L-A2",
-        "snow_hahner",
-        Lidar,
-        "weather",
-        Missing,
-        "3D-Corruptions-AD snow_sim_nus (Hahner + wet ground)",
-        "Physics snowfall: per-beam snowflake occlusion and wet ground"
-    ),
-    entry!(
-        "L-A3",
-        "snow_multicorrupt",
-        Lidar,
-        "weather",
-        Missing,
-        "MultiCorrupt simulate_snow",
-        "Hahner snowfall with MultiCorrupt's parameters, no wet ground"
-    ),
-    entry!(
-        "L-A4",
-        "snow_fast",
-        Lidar,
-        "weather",
-        Missing,
-        "lightweight approximation (paper)",
-        "Constant-time snow: distance and intensity attenuation, point removal, near-field flakes"
-    ),
-    entry!(
-        "L-A5",
-        "rain_lisa",
-        Lidar,
-        "weather",
-        Missing,
-        "3D-Corruptions-AD rain_sim (LISA, Marshall-Palmer)",
-        "Rainfall by Monte-Carlo scattering of each beam on water drops (LISA)"
-    ),
-    entry!(
-        "L-A6",
-        "rain_fast",
-        Lidar,
-        "weather",
-        Missing,
-        "lightweight approximation (paper)",
-        "Constant-time rain: intensity attenuation and sparsification of distant points"
-    ),
-    entry!(
-        "L-A7",
-        "fog_hahner",
-        Lidar,
-        "weather",
-        Missing,
-        "3D-Corruptions-AD fog_sim (Hahner)",
-        "Physics fog: attenuation and soft-target fog returns"
-    ),
-    entry!(
-        "L-A8",
-        "fog_multicorrupt",
-        Lidar,
-        "weather",
-        Missing,
-        "MultiCorrupt simulate_fog",
-        "Hahner fog with MultiCorrupt's parameters"
-    ),
-    entry!(
-        "L-A9",
-        "fog_fast",
-        Lidar,
-        "weather",
-        Missing,
-        "lightweight approximation (paper)",
-        "Constant-time fog: survival exp(-alpha d) and near-field backscatter"
-    ),
-    entry!(
-        "L-A10",
-        "strong_sunlight",
-        Lidar,
-        "weather",
-        Missing,
-        "3D-Corruptions-AD scene_glare_noise",
-        "Sunlight saturating the receiver: strong noise on random points"
-    ),
+    entry!("L-A1", "snow_lisa", Lidar, "weather", Missing, "3D-Corruptions-AD snow_sim (LISA, Marshall-Gunn)", "Snowfall by Monte-Carlo scattering of each beam on ice particles (LISA)"),
+    entry!("L-A2", "snow_hahner", Lidar, "weather", Missing, "3D-Corruptions-AD snow_sim_nus (Hahner + wet ground)", "Physics snowfall: per-beam snowflake occlusion and wet ground"),
+    entry!("L-A3", "snow_multicorrupt", Lidar, "weather", Missing, "MultiCorrupt simulate_snow", "Hahner snowfall with MultiCorrupt's parameters, no wet ground"),
+    entry!("L-A4", "snow_fast", Lidar, "weather", Missing, "lightweight approximation (paper)", "Constant-time snow: distance and intensity attenuation, point removal, near-field flakes"),
+    entry!("L-A5", "rain_lisa", Lidar, "weather", Missing, "3D-Corruptions-AD rain_sim (LISA, Marshall-Palmer)", "Rainfall by Monte-Carlo scattering of each beam on water drops (LISA)"),
+    entry!("L-A6", "rain_fast", Lidar, "weather", Missing, "lightweight approximation (paper)", "Constant-time rain: intensity attenuation and sparsification of distant points"),
+    entry!("L-A7", "fog_hahner", Lidar, "weather", Missing, "3D-Corruptions-AD fog_sim (Hahner)", "Physics fog: attenuation and soft-target fog returns"),
+    entry!("L-A8", "fog_multicorrupt", Lidar, "weather", Missing, "MultiCorrupt simulate_fog", "Hahner fog with MultiCorrupt's parameters"),
+    entry!("L-A9", "fog_fast", Lidar, "weather", Missing, "lightweight approximation (paper)", "Constant-time fog: survival exp(-alpha d) and near-field backscatter"),
+    entry!("L-A10", "strong_sunlight", Lidar, "weather", Missing, "3D-Corruptions-AD scene_glare_noise", "Sunlight saturating the receiver: strong noise on random points"),
     // ---- LiDAR: sensor
-    entry!(
-        "L-B1",
-        "density_decrease",
-        Lidar,
-        "sensor",
-        Builder::Lidar(lidar::sensor::DENSITY_DECREASE),
-        "3D-Corruptions-AD density_dec_global",
-        "Random points lost uniformly over the cloud"
-    ),
-    entry!(
-        "L-B2",
-        "points_reducing",
-        Lidar,
-        "sensor",
-        Missing,
-        "MultiCorrupt pointsreducing",
-        "A large random fraction of the points removed"
-    ),
-    entry!(
-        "L-B3",
-        "beam_reduction",
-        Lidar,
-        "sensor",
-        Missing,
-        "MultiCorrupt reduce_LiDAR_beamsV2",
-        "A sensor with fewer beams: only some rings kept"
-    ),
-    entry!(
-        "L-B4",
-        "cutout",
-        Lidar,
-        "sensor",
-        Missing,
-        "3D-Corruptions-AD cutout_local",
-        "Occluded patches: clusters of nearby points removed"
-    ),
-    entry!(
-        "L-B5",
-        "crosstalk",
-        Lidar,
-        "sensor",
-        Missing,
-        "3D-Corruptions-AD lidar_crosstalk_noise",
-        "Interference from other LiDARs: strong noise on a few points"
-    ),
-    entry!(
-        "L-B6",
-        "fov_filter",
-        Lidar,
-        "sensor",
-        Builder::Lidar(lidar::sensor::FOV_FILTER),
-        "3D-Corruptions-AD fov_filter",
-        "Narrower horizontal field of view around the forward axis"
-    ),
+    entry!("L-B1", "density_decrease", Lidar, "sensor", Builder::Lidar(lidar::sensor::DENSITY_DECREASE), "3D-Corruptions-AD density_dec_global", "Random points lost uniformly over the cloud"),
+    entry!("L-B2", "points_reducing", Lidar, "sensor", Missing, "MultiCorrupt pointsreducing", "A large random fraction of the points removed"),
+    entry!("L-B3", "beam_reduction", Lidar, "sensor", Missing, "MultiCorrupt reduce_LiDAR_beamsV2", "A sensor with fewer beams: only some rings kept"),
+    entry!("L-B4", "cutout", Lidar, "sensor", Missing, "3D-Corruptions-AD cutout_local", "Occluded patches: clusters of nearby points removed"),
+    entry!("L-B5", "crosstalk", Lidar, "sensor", Missing, "3D-Corruptions-AD lidar_crosstalk_noise", "Interference from other LiDARs: strong noise on a few points"),
+    entry!("L-B6", "fov_filter", Lidar, "sensor", Builder::Lidar(lidar::sensor::FOV_FILTER), "3D-Corruptions-AD fov_filter", "Narrower horizontal field of view around the forward axis"),
     // ---- LiDAR: noise
-    entry!(
-        "L-C1",
-        "gaussian_noise",
-        Lidar,
-        "noise",
-        Builder::Lidar(lidar::noise::GAUSSIAN),
-        "3D-Corruptions-AD gaussian_noise",
-        "Gaussian range jitter on every point"
-    ),
-    entry!(
-        "L-C2",
-        "uniform_noise",
-        Lidar,
-        "noise",
-        Missing,
-        "3D-Corruptions-AD uniform_noise",
-        "Uniform jitter on every point"
-    ),
-    entry!(
-        "L-C3",
-        "impulse_noise",
-        Lidar,
-        "noise",
-        Missing,
-        "3D-Corruptions-AD impulse_noise",
-        "A fraction of points displaced by a fixed step"
-    ),
+    entry!("L-C1", "gaussian_noise", Lidar, "noise", Builder::Lidar(lidar::noise::GAUSSIAN), "3D-Corruptions-AD gaussian_noise", "Gaussian range jitter on every point"),
+    entry!("L-C2", "uniform_noise", Lidar, "noise", Missing, "3D-Corruptions-AD uniform_noise", "Uniform jitter on every point"),
+    entry!("L-C3", "impulse_noise", Lidar, "noise", Missing, "3D-Corruptions-AD impulse_noise", "A fraction of points displaced by a fixed step"),
     // ---- LiDAR: local (object-level)
-    entry!(
-        "L-D1",
-        "local_density_decrease",
-        Lidar,
-        "local",
-        Missing,
-        "3D-Corruptions-AD density_dec_bbox",
-        "Points of detected objects thinned"
-    ),
-    entry!(
-        "L-D2",
-        "local_cutout",
-        Lidar,
-        "local",
-        Missing,
-        "3D-Corruptions-AD cutout_bbox",
-        "A part of each detected object cut away"
-    ),
-    entry!(
-        "L-D3",
-        "local_gaussian_noise",
-        Lidar,
-        "local",
-        Missing,
-        "3D-Corruptions-AD gaussian_noise_bbox",
-        "Gaussian jitter on the points of detected objects"
-    ),
-    entry!(
-        "L-D4",
-        "local_uniform_noise",
-        Lidar,
-        "local",
-        Missing,
-        "3D-Corruptions-AD uniform_noise_bbox",
-        "Uniform jitter on the points of detected objects"
-    ),
-    entry!(
-        "L-D5",
-        "local_impulse_noise",
-        Lidar,
-        "local",
-        Missing,
-        "3D-Corruptions-AD impulse_noise_bbox",
-        "Impulse displacement of points of detected objects"
-    ),
+    entry!("L-D1", "local_density_decrease", Lidar, "local", Missing, "3D-Corruptions-AD density_dec_bbox", "Points of detected objects thinned"),
+    entry!("L-D2", "local_cutout", Lidar, "local", Missing, "3D-Corruptions-AD cutout_bbox", "A part of each detected object cut away"),
+    entry!("L-D3", "local_gaussian_noise", Lidar, "local", Missing, "3D-Corruptions-AD gaussian_noise_bbox", "Gaussian jitter on the points of detected objects"),
+    entry!("L-D4", "local_uniform_noise", Lidar, "local", Missing, "3D-Corruptions-AD uniform_noise_bbox", "Uniform jitter on the points of detected objects"),
+    entry!("L-D5", "local_impulse_noise", Lidar, "local", Missing, "3D-Corruptions-AD impulse_noise_bbox", "Impulse displacement of points of detected objects"),
     // ---- LiDAR: affine (object-level)
-    entry!(
-        "L-E1",
-        "shear",
-        Lidar,
-        "affine",
-        Missing,
-        "3D-Corruptions-AD shear_bbox",
-        "Detected objects sheared inside their boxes"
-    ),
-    entry!(
-        "L-E2",
-        "scale",
-        Lidar,
-        "affine",
-        Missing,
-        "3D-Corruptions-AD scale_bbox",
-        "Detected objects stretched or squeezed along one axis"
-    ),
-    entry!(
-        "L-E3",
-        "rotation",
-        Lidar,
-        "affine",
-        Missing,
-        "3D-Corruptions-AD rotation_bbox",
-        "Detected objects rotated about their vertical axis"
-    ),
+    entry!("L-E1", "shear", Lidar, "affine", Missing, "3D-Corruptions-AD shear_bbox", "Detected objects sheared inside their boxes"),
+    entry!("L-E2", "scale", Lidar, "affine", Missing, "3D-Corruptions-AD scale_bbox", "Detected objects stretched or squeezed along one axis"),
+    entry!("L-E3", "rotation", Lidar, "affine", Missing, "3D-Corruptions-AD rotation_bbox", "Detected objects rotated about their vertical axis"),
     // ---- LiDAR: motion and alignment
-    entry!(
-        "L-F1",
-        "motion_blur",
-        Lidar,
-        "motion",
-        Missing,
-        "MultiCorrupt pts_motion",
-        "Ego-motion smear: a global shift plus per-point jitter"
-    ),
-    entry!(
-        "L-F2",
-        "moving_object",
-        Lidar,
-        "motion",
-        Missing,
-        "3D-Corruptions-AD moving_noise_bbox",
-        "Detected objects smeared as if moving during the sweep"
-    ),
-    entry!(
-        "L-F3",
-        "ghost_points",
-        Lidar,
-        "motion",
-        Missing,
-        "project's own",
-        "Displaced, dimmer copies of the points of detected objects"
-    ),
-    entry!(
-        "L-F4",
-        "spatial_misalignment",
-        Lidar,
-        "motion",
-        Missing,
-        "MultiCorrupt transform_points",
-        "Extrinsic calibration error: a rigid rotation and shift"
-    ),
+    entry!("L-F1", "motion_blur", Lidar, "motion", Missing, "MultiCorrupt pts_motion", "Ego-motion smear: a global shift plus per-point jitter"),
+    entry!("L-F2", "moving_object", Lidar, "motion", Missing, "3D-Corruptions-AD moving_noise_bbox", "Detected objects smeared as if moving during the sweep"),
+    entry!("L-F3", "ghost_points", Lidar, "motion", Missing, "project's own", "Displaced, dimmer copies of the points of detected objects"),
+    entry!("L-F4", "spatial_misalignment", Lidar, "motion", Missing, "MultiCorrupt transform_points", "Extrinsic calibration error: a rigid rotation and shift"),
 ];
 
 #[cfg(test)]
