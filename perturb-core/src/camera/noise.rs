@@ -302,8 +302,16 @@ pub struct JpegCompression {
 
 type Block = [[f32; 8]; 8];
 
-/// `a * b` for 8x8 matrices, written row by row so that each inner step is an 8-wide vector op.
+/// Round to nearest (ties to even) without a libm call: adding and subtracting 1.5 x 2^23 pushes the
+/// fraction out of an f32's mantissa. Exact for |x| < 2^22, far beyond any DCT coefficient.
 #[inline]
+fn round_f32(x: f32) -> f32 {
+    const MAGIC: f32 = 12_582_912.0;
+    (x + MAGIC) - MAGIC
+}
+
+/// `a * b` for 8x8 matrices, written row by row so that each inner step is an 8-wide vector op.
+#[inline(always)]
 fn mul8(a: &Block, b: &Block) -> Block {
     let mut out = [[0f32; 8]; 8];
     for (o, arow) in out.iter_mut().zip(a) {
@@ -316,7 +324,7 @@ fn mul8(a: &Block, b: &Block) -> Block {
     out
 }
 
-#[inline]
+#[inline(always)]
 fn transpose8(a: &Block) -> Block {
     let mut t = [[0f32; 8]; 8];
     for (i, row) in a.iter().enumerate() {
@@ -388,6 +396,7 @@ impl JpegCompression {
         use rayon::prelude::*;
         let pw = p.w;
         let (m, mt) = (&self.m, &self.mt);
+        let qinv = q.map(|v| 1.0 / v);
         p.data.par_chunks_mut(pw * 8).for_each(|band| {
             for bx in 0..pw / 8 {
                 let mut blk = [[0f32; 8]; 8];
@@ -400,8 +409,7 @@ impl JpegCompression {
                 let mut c = transpose8(&mul8(m, &transpose8(&mul8(m, &blk))));
                 for (u, row) in c.iter_mut().enumerate() {
                     for (v, coef) in row.iter_mut().enumerate() {
-                        let qk = q[u * 8 + v];
-                        *coef = (*coef / qk).round() * qk;
+                        *coef = round_f32(*coef * qinv[u * 8 + v]) * q[u * 8 + v];
                     }
                 }
                 // Inverse: B = M^T C M = (M^T (M^T C)^T)^T.
@@ -413,6 +421,23 @@ impl JpegCompression {
                 }
             }
         });
+    }
+}
+
+/// JFIF RGB to YCbCr of one row: luma into `y`, chroma summed into the half-width `cb`, `cr`.
+#[inline]
+fn to_ycc<const C: usize>(
+    src: &[u8],
+    [ri, gi, bi]: [usize; 3],
+    y: &mut [f32],
+    cb: &mut [f32],
+    cr: &mut [f32],
+) {
+    for ((px, yv), x) in src.chunks_exact(C).zip(y.iter_mut()).zip(0usize..) {
+        let (r, g, b) = (px[ri] as f32, px[gi] as f32, px[bi] as f32);
+        *yv = 0.299 * r + 0.587 * g + 0.114 * b;
+        cb[x >> 1] += -0.168_736 * r - 0.331_264 * g + 0.5 * b;
+        cr[x >> 1] += 0.5 * r - 0.418_688 * g - 0.081_312 * b;
     }
 }
 
@@ -456,19 +481,17 @@ impl CameraPerturbation for JpegCompression {
             .take(ch)
             .enumerate()
             .for_each(|(cy, (ypair, (cbrow, crrow)))| {
-                let rows = (2 * cy..(2 * cy + 2).min(h)).collect::<Vec<_>>();
-                for (k, &r) in rows.iter().enumerate() {
-                    let src = input.row(r);
-                    for x in 0..w {
-                        let p = &src[x * c..];
-                        let (rr, gg, bb) = (p[ri] as f32, p[gi] as f32, p[bi] as f32);
-                        ypair[k * ypw + x] = 0.299 * rr + 0.587 * gg + 0.114 * bb;
-                        cbrow[x / 2] += -0.168_736 * rr - 0.331_264 * gg + 0.5 * bb;
-                        crrow[x / 2] += 0.5 * rr - 0.418_688 * gg - 0.081_312 * bb;
+                let r0 = 2 * cy;
+                let nrows = (h - r0).min(2);
+                for k in 0..nrows {
+                    let yrow = &mut ypair[k * ypw..k * ypw + w];
+                    match c {
+                        3 => to_ycc::<3>(input.row(r0 + k), [ri, gi, bi], yrow, cbrow, crrow),
+                        _ => to_ycc::<4>(input.row(r0 + k), [ri, gi, bi], yrow, cbrow, crrow),
                     }
                 }
                 for cx in 0..cw {
-                    let n = (rows.len() * ((2 * cx + 2).min(w) - 2 * cx)) as f32;
+                    let n = (nrows * ((2 * cx + 2).min(w) - 2 * cx)) as f32;
                     cbrow[cx] = cbrow[cx] / n + 128.0;
                     crrow[cx] = crrow[cx] / n + 128.0;
                 }
