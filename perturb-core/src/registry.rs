@@ -237,18 +237,18 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("L-A7", "fog_hahner", Lidar, "weather", Missing, "3D-Corruptions-AD fog_sim (Hahner)", "Physics fog: attenuation and soft-target fog returns"),
     entry!("L-A8", "fog_multicorrupt", Lidar, "weather", Missing, "MultiCorrupt simulate_fog", "Hahner fog with MultiCorrupt's parameters"),
     entry!("L-A9", "fog_fast", Lidar, "weather", Missing, "lightweight approximation (paper)", "Constant-time fog: survival exp(-alpha d) and near-field backscatter"),
-    entry!("L-A10", "strong_sunlight", Lidar, "weather", Missing, "3D-Corruptions-AD scene_glare_noise", "Sunlight saturating the receiver: strong noise on random points"),
+    entry!("L-A10", "strong_sunlight", Lidar, "weather", Builder::Lidar(lidar::noise::SUNLIGHT), "3D-Corruptions-AD scene_glare_noise", "Sunlight saturating the receiver: strong noise on random points"),
     // ---- LiDAR: sensor
     entry!("L-B1", "density_decrease", Lidar, "sensor", Builder::Lidar(lidar::sensor::DENSITY_DECREASE), "3D-Corruptions-AD density_dec_global", "Random points lost uniformly over the cloud"),
-    entry!("L-B2", "points_reducing", Lidar, "sensor", Missing, "MultiCorrupt pointsreducing", "A large random fraction of the points removed"),
-    entry!("L-B3", "beam_reduction", Lidar, "sensor", Missing, "MultiCorrupt reduce_LiDAR_beamsV2", "A sensor with fewer beams: only some rings kept"),
-    entry!("L-B4", "cutout", Lidar, "sensor", Missing, "3D-Corruptions-AD cutout_local", "Occluded patches: clusters of nearby points removed"),
-    entry!("L-B5", "crosstalk", Lidar, "sensor", Missing, "3D-Corruptions-AD lidar_crosstalk_noise", "Interference from other LiDARs: strong noise on a few points"),
+    entry!("L-B2", "points_reducing", Lidar, "sensor", Builder::Lidar(lidar::sensor::POINTS_REDUCING), "MultiCorrupt pointsreducing", "A large random fraction of the points removed"),
+    entry!("L-B3", "beam_reduction", Lidar, "sensor", Builder::Lidar(lidar::sensor::BEAM_REDUCTION), "MultiCorrupt reduce_LiDAR_beamsV2", "A sensor with fewer beams: only some rings kept"),
+    entry!("L-B4", "cutout", Lidar, "sensor", Builder::Lidar(lidar::sensor::CUTOUT), "3D-Corruptions-AD cutout_local", "Occluded patches: clusters of nearby points removed"),
+    entry!("L-B5", "crosstalk", Lidar, "sensor", Builder::Lidar(lidar::sensor::CROSSTALK), "3D-Corruptions-AD lidar_crosstalk_noise", "Interference from other LiDARs: strong noise on a few points"),
     entry!("L-B6", "fov_filter", Lidar, "sensor", Builder::Lidar(lidar::sensor::FOV_FILTER), "3D-Corruptions-AD fov_filter", "Narrower horizontal field of view around the forward axis"),
     // ---- LiDAR: noise
     entry!("L-C1", "gaussian_noise", Lidar, "noise", Builder::Lidar(lidar::noise::GAUSSIAN), "3D-Corruptions-AD gaussian_noise", "Gaussian range jitter on every point"),
-    entry!("L-C2", "uniform_noise", Lidar, "noise", Missing, "3D-Corruptions-AD uniform_noise", "Uniform jitter on every point"),
-    entry!("L-C3", "impulse_noise", Lidar, "noise", Missing, "3D-Corruptions-AD impulse_noise", "A fraction of points displaced by a fixed step"),
+    entry!("L-C2", "uniform_noise", Lidar, "noise", Builder::Lidar(lidar::noise::UNIFORM), "3D-Corruptions-AD uniform_noise", "Uniform jitter on every point"),
+    entry!("L-C3", "impulse_noise", Lidar, "noise", Builder::Lidar(lidar::noise::IMPULSE), "3D-Corruptions-AD impulse_noise", "A fraction of points displaced by a fixed step"),
     // ---- LiDAR: local (object-level)
     entry!("L-D1", "local_density_decrease", Lidar, "local", Missing, "3D-Corruptions-AD density_dec_bbox", "Points of detected objects thinned"),
     entry!("L-D2", "local_cutout", Lidar, "local", Missing, "3D-Corruptions-AD cutout_bbox", "A part of each detected object cut away"),
@@ -260,10 +260,10 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("L-E2", "scale", Lidar, "affine", Missing, "3D-Corruptions-AD scale_bbox", "Detected objects stretched or squeezed along one axis"),
     entry!("L-E3", "rotation", Lidar, "affine", Missing, "3D-Corruptions-AD rotation_bbox", "Detected objects rotated about their vertical axis"),
     // ---- LiDAR: motion and alignment
-    entry!("L-F1", "motion_blur", Lidar, "motion", Missing, "MultiCorrupt pts_motion", "Ego-motion smear: a global shift plus per-point jitter"),
+    entry!("L-F1", "motion_blur", Lidar, "motion", Builder::Lidar(lidar::motion::MOTION_BLUR), "MultiCorrupt pts_motion", "Ego-motion smear: a global shift plus per-point jitter"),
     entry!("L-F2", "moving_object", Lidar, "motion", Missing, "3D-Corruptions-AD moving_noise_bbox", "Detected objects smeared as if moving during the sweep"),
     entry!("L-F3", "ghost_points", Lidar, "motion", Missing, "project's own", "Displaced, dimmer copies of the points of detected objects"),
-    entry!("L-F4", "spatial_misalignment", Lidar, "motion", Missing, "MultiCorrupt transform_points", "Extrinsic calibration error: a rigid rotation and shift"),
+    entry!("L-F4", "spatial_misalignment", Lidar, "motion", Builder::Lidar(lidar::motion::MISALIGNMENT_BUILDER), "MultiCorrupt transform_points", "Extrinsic calibration error: a rigid rotation and shift"),
 ];
 
 #[cfg(test)]

@@ -194,8 +194,10 @@ fn changes_a_real_kitti_scan_at_every_severity() {
         for s in e.severities() {
             let mut p = LidarPerturber::new(e.id, s, 7, sensor.clone()).unwrap();
             let boxes = boxes();
-            let out = p.apply_owned(&view, 0, Some(&boxes)).unwrap();
-            assert_ne!(out.data, scan.data, "{} s{s}: the scan is unchanged", e.id);
+            // Some perturbations act on a random subset of clouds (L-F4): one of 16 frames must change.
+            let changed = (0..16)
+                .any(|seq| p.apply_owned(&view, seq, Some(&boxes)).unwrap().data != scan.data);
+            assert!(changed, "{} s{s}: the scan is unchanged in 16 frames", e.id);
         }
     }
 }
