@@ -1,37 +1,45 @@
 //! Colour and tone family (C-F): changes of hue, saturation and tone.
 
-use super::ops::par_rows;
+use super::ops::{apply_lut, map_saturation, par_rows};
 use super::{CameraBuilder, CameraPerturbation, CameraSetup};
 use crate::error::Error;
 use crate::image::{ImageView, ImageViewMut};
+
+pub(crate) fn refuse_mono(id: &'static str, s: &CameraSetup) -> Result<(), Error> {
+    if s.geometry.format.is_mono() {
+        return Err(Error::UnsupportedPixelFormat {
+            id,
+            format: "mono8 (it has no colour)",
+        });
+    }
+    Ok(())
+}
 
 /// C-F5 grayscale: blend weight towards the luma, severities 1..5 (PerturbationDrive
 /// `grayscale_filter`).
 pub const GRAYSCALE_WEIGHT: [f32; 5] = [0.10, 0.20, 0.35, 0.55, 0.85];
 
 /// C-F5 grayscale: `out = (1 - s) I + s Y` per colour channel with `Y = .299 R + .587 G + .114 B`,
-/// rounded; alpha is copied. Mono8 input is refused: it is already grey, so the perturbation would
-/// do nothing.
+/// in 8.8 fixed point (two 256-entry tables for the two terms), rounded; alpha is copied. Mono8 input
+/// is refused: it is already grey, so the perturbation would do nothing.
 pub struct Grayscale {
-    weight: f32,
+    keep: [u16; 256],
+    luma: [u16; 256],
 }
 
 /// Registry constructor of C-F5.
 pub const GRAYSCALE: CameraBuilder = |s| {
-    if s.geometry.format.is_mono() {
-        return Err(Error::UnsupportedPixelFormat {
-            id: "C-F5",
-            format: "mono8 (already grey)",
-        });
-    }
+    refuse_mono("C-F5", s)?;
     Ok(Box::new(Grayscale::new(s)))
 };
 
 impl Grayscale {
     /// Configures the blend weight for the severity.
     pub fn new(setup: &CameraSetup) -> Self {
+        let w = GRAYSCALE_WEIGHT[setup.level()];
         Grayscale {
-            weight: GRAYSCALE_WEIGHT[setup.level()],
+            keep: std::array::from_fn(|v| ((1.0 - w) * v as f32 * 256.0).round() as u16),
+            luma: std::array::from_fn(|v| (w * v as f32 * 256.0).round() as u16),
         }
     }
 }
@@ -41,17 +49,307 @@ impl CameraPerturbation for Grayscale {
         let format = input.format;
         let [ri, gi, bi] = format.rgb_offsets();
         let c = format.channels();
-        let s = self.weight;
         par_rows(input, output, |_, src, dst| {
             for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
-                let y = 0.299 * p[ri] as f32 + 0.587 * p[gi] as f32 + 0.114 * p[bi] as f32;
+                let y = crate::image::luma(p[ri], p[gi], p[bi]) as usize;
+                let ly = self.luma[y];
                 for ch in [ri, gi, bi] {
-                    q[ch] = ((1.0 - s) * p[ch] as f32 + s * y + 0.5).clamp(0.0, 255.0) as u8;
+                    q[ch] = ((self.keep[p[ch] as usize] + ly + 128) >> 8).min(255) as u8;
                 }
                 if let Some(a) = format.alpha_offset() {
                     q[a] = p[a];
                 }
             }
         });
+    }
+}
+
+/// C-F6 saturation_increase: saturation factor, severities 1..5 (PerturbationDrive
+/// `saturation_filter`).
+pub const SATURATION_INCREASE: [f32; 5] = [1.05, 1.15, 1.40, 1.65, 1.90];
+/// C-F8 saturation_decrease: saturation factor, severities 1..5 (PerturbationDrive
+/// `saturation_decrease_filter`).
+pub const SATURATION_DECREASE: [f32; 5] = [0.90, 0.85, 0.60, 0.35, 0.10];
+
+/// C-F6 saturation_increase / C-F8 saturation_decrease: HSV saturation `S' = min(255, S m)`
+/// (truncated, as the reference's uint8 write), hue and value kept; see [`map_saturation`] for how
+/// this is computed in RGB. Mono8 is refused.
+pub struct Saturation {
+    lut: [u8; 256],
+}
+
+impl Saturation {
+    /// Saturation scaled by `m`.
+    pub fn new(m: f32) -> Self {
+        Saturation {
+            lut: std::array::from_fn(|s| (s as f32 * m).min(255.0) as u8),
+        }
+    }
+}
+
+/// Registry constructor of C-F6.
+pub const SATURATION_UP: CameraBuilder = |s| {
+    refuse_mono("C-F6", s)?;
+    Ok(Box::new(Saturation::new(SATURATION_INCREASE[s.level()])))
+};
+
+/// Registry constructor of C-F8.
+pub const SATURATION_DOWN: CameraBuilder = |s| {
+    refuse_mono("C-F8", s)?;
+    Ok(Box::new(Saturation::new(SATURATION_DECREASE[s.level()])))
+};
+
+impl CameraPerturbation for Saturation {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
+        map_saturation(input, output, &self.lut);
+    }
+}
+
+/// C-F7 posterize: levels per channel, severities 1..5 (PerturbationDrive `posterize_filter`).
+pub const POSTERIZE_LEVELS: [u32; 5] = [128, 64, 32, 8, 4];
+
+/// The reference's posterize table: `min(255, floor(v / (255 / L)) floor(255 / (L - 1)))`.
+pub fn posterize_lut(levels: u32) -> [u8; 256] {
+    let step = 255.0 / levels as f64;
+    let scale = (255 / (levels - 1)) as f64;
+    std::array::from_fn(|v| ((v as f64 / step).floor() * scale).min(255.0) as u8)
+}
+
+/// C-F7 posterize: the reference's lookup table per channel (works on mono8 too). At s4 (L = 8)
+/// the table has 9 output levels and at s5 (L = 4) {0, 85, 170, 255}, as in the reference.
+pub struct Posterize {
+    lut: [u8; 256],
+}
+
+/// Registry constructor of C-F7.
+pub const POSTERIZE: CameraBuilder = |s| {
+    Ok(Box::new(Posterize {
+        lut: posterize_lut(POSTERIZE_LEVELS[s.level()]),
+    }))
+};
+
+impl CameraPerturbation for Posterize {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
+        apply_lut(input, output, &self.lut);
+    }
+}
+
+/// C-F4 white_balance: blend weight towards the gray-world balanced image, severities 1..5
+/// (PerturbationDrive `white_balance_filter`).
+pub const WHITE_BALANCE_WEIGHT: [f32; 5] = [0.10, 0.25, 0.50, 0.75, 0.99];
+
+/// C-F4 white_balance: gray-world balance: each channel scaled by `mean(all channels) /
+/// mean(channel)` (clipped, truncated to 8 bits as the reference), then `out = (1 - s) I + s WB`.
+/// The channel means are measured on each frame (one pass), the rest is a per-channel table.
+/// Mono8 is refused (a single channel is always balanced).
+pub struct WhiteBalance {
+    weight: f32,
+}
+
+/// Registry constructor of C-F4.
+pub const WHITE_BALANCE: CameraBuilder = |s| {
+    refuse_mono("C-F4", s)?;
+    Ok(Box::new(WhiteBalance {
+        weight: WHITE_BALANCE_WEIGHT[s.level()],
+    }))
+};
+
+impl CameraPerturbation for WhiteBalance {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
+        use rayon::prelude::*;
+        let format = input.format;
+        let c = format.channels();
+        let [ri, gi, bi] = format.rgb_offsets();
+        let sums = (0..input.height as usize)
+            .into_par_iter()
+            .map(|y| {
+                let mut s = [0u64; 3];
+                for p in input.row(y).chunks_exact(c) {
+                    s[0] += p[ri] as u64;
+                    s[1] += p[gi] as u64;
+                    s[2] += p[bi] as u64;
+                }
+                s
+            })
+            .reduce(|| [0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]]);
+        let n = (input.width as f64 * input.height as f64).max(1.0);
+        let means = sums.map(|v| v as f64 / n);
+        let all = (means[0] + means[1] + means[2]) / 3.0;
+        let w = self.weight as f64;
+        let luts: [[u8; 256]; 3] = std::array::from_fn(|k| {
+            let gain = if means[k] > 0.0 { all / means[k] } else { 1.0 };
+            std::array::from_fn(|v| {
+                let balanced = (v as f64 * gain).min(255.0).floor();
+                ((1.0 - w) * v as f64 + w * balanced)
+                    .round()
+                    .clamp(0.0, 255.0) as u8
+            })
+        });
+        par_rows(input, output, |_, src, dst| {
+            for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
+                q[ri] = luts[0][p[ri] as usize];
+                q[gi] = luts[1][p[gi] as usize];
+                q[bi] = luts[2][p[bi] as usize];
+                if let Some(a) = format.alpha_offset() {
+                    q[a] = p[a];
+                }
+            }
+        });
+    }
+}
+
+/// C-F1 false_color: the five colour manipulations of PerturbationDrive `false_color_filter`, one
+/// per severity, on the channels (c0, c1, c2) in the image's own order as the reference does.
+pub const FALSE_COLOR_MODES: [&str; 5] = [
+    "rotate (c1, c2, c0)",
+    "swap c0 c1",
+    "swap c0 c2",
+    "invert",
+    "mix neighbours",
+];
+
+/// C-F1 false_color: s1 (c0, c1, c2) <- (c1, c2, c0); s2 swaps c0 and c1; s3 swaps c0 and c2;
+/// s4 inverts (255 - I); s5 replaces each channel by the mean of itself and the next one,
+/// c0 <- (c0 + c1) / 2, c1 <- (c1 + c2) / 2, c2 <- (c2 + c0) / 2.
+///
+/// Deviation: the reference computes s5 in uint8 and wraps around ((200, 100, 50) becomes
+/// (22, 75, 125)); here the sums are done without overflow ((150, 75, 125)), which is what the
+/// channel mixing intends. Mono8 is refused (one channel cannot be permuted).
+pub struct FalseColor {
+    mode: usize,
+}
+
+/// Registry constructor of C-F1.
+pub const FALSE_COLOR: CameraBuilder = |s| {
+    refuse_mono("C-F1", s)?;
+    Ok(Box::new(FalseColor { mode: s.level() }))
+};
+
+impl CameraPerturbation for FalseColor {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
+        let format = input.format;
+        let c = format.channels();
+        let mode = self.mode;
+        par_rows(input, output, |_, src, dst| {
+            for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
+                let (a, b, d) = (p[0], p[1], p[2]);
+                let (x, y, z) = match mode {
+                    0 => (b, d, a),
+                    1 => (b, a, d),
+                    2 => (d, b, a),
+                    3 => (255 - a, 255 - b, 255 - d),
+                    _ => (
+                        ((a as u16 + b as u16) / 2) as u8,
+                        ((b as u16 + d as u16) / 2) as u8,
+                        ((d as u16 + a as u16) / 2) as u8,
+                    ),
+                };
+                q[0] = x;
+                q[1] = y;
+                q[2] = z;
+                if c == 4 {
+                    q[3] = p[3];
+                }
+            }
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::{Image, PixelFormat};
+
+    fn run(b: CameraBuilder, sev: u8, img: &Image) -> Image {
+        let p = b(&CameraSetup {
+            severity: sev,
+            seed: 1,
+            geometry: img.geometry(),
+        })
+        .unwrap();
+        let mut out = Image::with_geometry(img.geometry());
+        p.apply(&img.view(), &mut out.view_mut(), 0);
+        out
+    }
+
+    fn px(r: u8, g: u8, b: u8) -> Image {
+        Image::from_vec(vec![r, g, b], 1, 1, 3, PixelFormat::Rgb8).unwrap()
+    }
+
+    #[test]
+    fn false_color_modes() {
+        let i = px(200, 100, 50);
+        assert_eq!(run(FALSE_COLOR, 1, &i).data, vec![100, 50, 200]);
+        assert_eq!(run(FALSE_COLOR, 2, &i).data, vec![100, 200, 50]);
+        assert_eq!(run(FALSE_COLOR, 3, &i).data, vec![50, 100, 200]);
+        assert_eq!(run(FALSE_COLOR, 4, &i).data, vec![55, 155, 205]);
+        assert_eq!(
+            run(FALSE_COLOR, 5, &i).data,
+            vec![150, 75, 125],
+            "no uint8 wrap-around"
+        );
+    }
+
+    #[test]
+    fn posterize_levels_match_the_reference_table() {
+        let distinct = |l| {
+            let t = posterize_lut(l);
+            let mut v: Vec<u8> = t.to_vec();
+            v.dedup();
+            v
+        };
+        assert_eq!(distinct(4), vec![0, 85, 170, 255]);
+        assert_eq!(distinct(8).len(), 9);
+        // The reference formula reaches L at v = 255, so L + 1 levels for L = 128, 64, 32
+        // (numpy: 129, 65, 33, 9, 4 distinct values).
+        assert_eq!(distinct(128).len(), 129);
+        assert_eq!(distinct(64).len(), 65);
+        assert_eq!(distinct(32).len(), 33);
+    }
+
+    #[test]
+    fn saturation_scales_colourfulness_and_keeps_value_and_grey() {
+        let i = px(200, 120, 80);
+        let up = run(SATURATION_UP, 5, &i);
+        let down = run(SATURATION_DOWN, 5, &i);
+        assert_eq!(up.data[0], 200);
+        assert_eq!(down.data[0], 200, "value (max) kept");
+        assert!(
+            up.data[2] < 80 && down.data[2] > 180,
+            "{:?} {:?}",
+            up.data,
+            down.data
+        );
+        // Decrease at s5 keeps 10% of the saturation: the channels nearly meet at V.
+        assert!(down.data.iter().all(|&v| v >= 188));
+        assert_eq!(
+            run(SATURATION_UP, 5, &px(90, 90, 90)).data,
+            vec![90, 90, 90]
+        );
+    }
+
+    #[test]
+    fn white_balance_evens_out_a_colour_cast() {
+        let mut img = Image::new(8, 8, PixelFormat::Rgb8);
+        for p in img.data.chunks_exact_mut(3) {
+            p.copy_from_slice(&[180, 120, 60]);
+        }
+        let out = run(WHITE_BALANCE, 5, &img);
+        let p = &out.data[..3];
+        assert!(p.iter().all(|&v| (v as i32 - 120).abs() <= 2), "{p:?}");
+        let mild = run(WHITE_BALANCE, 1, &img);
+        assert!(
+            mild.data[0] < 180 && mild.data[0] > 170,
+            "{:?}",
+            &mild.data[..3]
+        );
+    }
+
+    #[test]
+    fn grayscale_top_severity_is_near_neutral() {
+        let out = run(GRAYSCALE, 5, &px(200, 40, 90));
+        let spread = out.data.iter().max().unwrap() - out.data.iter().min().unwrap();
+        assert!(spread <= 24, "{:?}", out.data);
+        assert!(run(GRAYSCALE, 1, &px(200, 40, 90)).data[0] > 180);
     }
 }
