@@ -268,6 +268,21 @@ where
     });
 }
 
+/// `2^32 / v` for v in 1..=255 (0 for v = 0), rounded: replaces a division by an 8-bit value with
+/// a multiplication.
+pub fn reciprocals() -> &'static [u64; 256] {
+    static R: std::sync::OnceLock<[u64; 256]> = std::sync::OnceLock::new();
+    R.get_or_init(|| {
+        std::array::from_fn(|v| {
+            if v == 0 {
+                0
+            } else {
+                ((1u64 << 32) + v as u64 / 2) / v as u64
+            }
+        })
+    })
+}
+
 /// Changes the HSV value of every pixel and keeps hue and saturation, in RGB directly: each colour
 /// channel is scaled by `V' / V` (`V` = max of the channels). `vmap(y, x, v)` gives the new value.
 /// This is what converting to HSV, changing V and converting back computes, without OpenCV's 8-bit
@@ -280,6 +295,7 @@ where
     let format = input.format;
     let c = format.channels();
     let [ri, gi, bi] = format.rgb_offsets();
+    let recip = reciprocals();
     par_rows(input, output, |y, src, dst| {
         if format.is_mono() {
             for (x, (s, d)) in src.iter().zip(dst.iter_mut()).enumerate() {
@@ -289,15 +305,16 @@ where
         }
         for (x, (p, q)) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)).enumerate() {
             let v = p[ri].max(p[gi]).max(p[bi]);
-            let nv = vmap(y, x, v) as u32;
+            let nv = vmap(y, x, v) as u64;
             if v == 0 {
                 q[ri] = nv as u8;
                 q[gi] = nv as u8;
                 q[bi] = nv as u8;
             } else {
-                let k = (nv << 16) / v as u32; // 16.16 fixed point
+                // c * nv / v with a 2^32-scaled reciprocal: exact to well under half a level.
+                let k = nv * recip[v as usize];
                 for ch in [ri, gi, bi] {
-                    q[ch] = ((p[ch] as u32 * k + 32768) >> 16).min(255) as u8;
+                    q[ch] = ((p[ch] as u64 * k + (1 << 31)) >> 32).min(255) as u8;
                 }
             }
             if let Some(a) = format.alpha_offset() {
@@ -315,13 +332,14 @@ pub fn map_saturation(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, smap
     let format = input.format;
     let c = format.channels();
     let [ri, gi, bi] = format.rgb_offsets();
+    let recip = reciprocals();
     par_rows(input, output, |_, src, dst| {
         if format.is_mono() {
             dst.copy_from_slice(src);
             return;
         }
         for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
-            let (r, g, b) = (p[ri] as i32, p[gi] as i32, p[bi] as i32);
+            let (r, g, b) = (p[ri] as i64, p[gi] as i64, p[bi] as i64);
             let v = r.max(g).max(b);
             let mn = r.min(g).min(b);
             let diff = v - mn;
@@ -330,12 +348,11 @@ pub fn map_saturation(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, smap
                 q[gi] = p[gi];
                 q[bi] = p[bi];
             } else {
-                let s = (diff * 255 + v / 2) / v;
-                let ns = smap[s as usize] as i32;
-                // c' = V - (V - c) S' / S, in 16.16 fixed point.
-                let k = (ns << 16) / s.max(1);
+                // S = round(255 diff / V), then c' = V - (V - c) S' / S, with reciprocal tables.
+                let s = ((diff * 255 * recip[v as usize] as i64 + (1 << 31)) >> 32).clamp(1, 255);
+                let k = smap[s as usize] as i64 * recip[s as usize] as i64;
                 for (ch, val) in [(ri, r), (gi, g), (bi, b)] {
-                    q[ch] = (v - (((v - val) * k + 32768) >> 16)).clamp(0, 255) as u8;
+                    q[ch] = (v - (((v - val) * k + (1 << 31)) >> 32)).clamp(0, 255) as u8;
                 }
             }
             if let Some(a) = format.alpha_offset() {
