@@ -207,10 +207,10 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("C-C11", "sun_glare", Camera, "weather", Missing, "PerturbationDrive dynamic_sun_filter", "Sun glare with streak and lens ghosts (procedural, animated)"),
     entry!("C-C12", "snowflakes", Camera, "weather", Missing, "PerturbationDrive effects_snowflake_dynamic", "Snowflakes rushing past while driving (particles, animated)"),
     // ---- Camera: distortion
-    entry!("C-D1", "elastic", Camera, "distortion", Missing, "PerturbationDrive elastic", "Elastic pixel jitter from a smoothed random displacement field"),
-    entry!("C-D2", "pixelate", Camera, "distortion", Missing, "PerturbationDrive pixelate", "Low-resolution blocks: downscale then nearest upscale"),
-    entry!("C-D3", "sample_pairing", Camera, "distortion", Missing, "PerturbationDrive sample_pairing_filter", "Blend with an enlarged random crop of the same frame"),
-    entry!("C-D4", "sharpen", Camera, "distortion", Missing, "PerturbationDrive sharpen_filter", "Over-sharpening with an unnormalised Laplacian kernel"),
+    entry!("C-D1", "elastic", Camera, "distortion", Builder::Camera(camera::distortion::ELASTIC_BUILDER), "PerturbationDrive elastic", "Elastic pixel jitter from a smoothed random displacement field"),
+    entry!("C-D2", "pixelate", Camera, "distortion", Builder::Camera(camera::distortion::PIXELATE), "PerturbationDrive pixelate", "Low-resolution blocks: downscale then nearest upscale"),
+    entry!("C-D3", "sample_pairing", Camera, "distortion", Builder::Camera(camera::distortion::SAMPLE_PAIRING), "PerturbationDrive sample_pairing_filter", "Blend with an enlarged random crop of the same frame"),
+    entry!("C-D4", "sharpen", Camera, "distortion", Builder::Camera(camera::distortion::SHARPEN_BUILDER), "PerturbationDrive sharpen_filter", "Over-sharpening with an unnormalised Laplacian kernel"),
     // ---- Camera: patterns
     entry!("C-E1", "splatter", Camera, "pattern", Missing, "PerturbationDrive splatter_mapping", "Black blobs of dirt on the lens"),
     entry!("C-E2", "dotted_lines", Camera, "pattern", Missing, "PerturbationDrive dotted_lines_mapping", "Dotted black lines across the image"),
