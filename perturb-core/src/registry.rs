@@ -221,7 +221,7 @@ pub static CATALOGUE: &[Entry] = &[
     // ---- Camera: colour and tone
     entry!("C-F1", "false_color", Camera, "color", Builder::Camera(camera::color::FALSE_COLOR), "PerturbationDrive false_color_filter", "Channel swaps, inversion and channel mixing"),
     entry!("C-F2", "phase_scrambling", Camera, "color", Missing, "PerturbationDrive phase_scrambling", "Fourier phase noise that keeps the power spectrum"),
-    entry!("C-F3", "histogram_equalization", Camera, "color", Missing, "PerturbationDrive histogram_equalisation", "CLAHE on brightness: local contrast boost"),
+    entry!("C-F3", "histogram_equalization", Camera, "color", Builder::Camera(camera::color::HISTOGRAM_EQUALIZATION), "PerturbationDrive histogram_equalisation", "CLAHE on brightness: local contrast boost"),
     entry!("C-F4", "white_balance", Camera, "color", Builder::Camera(camera::color::WHITE_BALANCE), "PerturbationDrive white_balance_filter", "Gray-world white balance shift"),
     entry!("C-F5", "grayscale", Camera, "color", Builder::Camera(camera::color::GRAYSCALE), "PerturbationDrive grayscale_filter", "Colour loss: blend towards the BT.601 luma"),
     entry!("C-F6", "saturation_increase", Camera, "color", Builder::Camera(camera::color::SATURATION_UP), "PerturbationDrive saturation_filter", "Over-saturated colours: HSV saturation scaled up"),

@@ -1,9 +1,10 @@
 //! Colour and tone family (C-F): changes of hue, saturation and tone.
 
-use super::ops::{apply_lut, map_saturation, par_rows};
+use super::ops::{apply_lut, map_saturation, map_value, par_rows};
 use super::{CameraBuilder, CameraPerturbation, CameraSetup};
 use crate::error::Error;
 use crate::image::{ImageView, ImageViewMut};
+use rayon::prelude::*;
 
 pub(crate) fn refuse_mono(id: &'static str, s: &CameraSetup) -> Result<(), Error> {
     if s.geometry.format.is_mono() {
@@ -255,6 +256,136 @@ impl CameraPerturbation for FalseColor {
     }
 }
 
+/// C-F3 histogram_equalization: CLAHE clip limit, severities 1..5 (PerturbationDrive
+/// `histogram_equalisation`, `cv2.createCLAHE(clipLimit, (8, 8))` on the HSV value channel).
+pub const CLAHE_CLIP: [f64; 5] = [1.0, 3.0, 5.0, 7.0, 10.0];
+
+/// Contrast-limited adaptive histogram equalisation of an 8-bit plane, as OpenCV's CLAHE: the plane
+/// is padded by reflection to a multiple of the 8 x 8 tile grid, each tile's histogram is clipped at
+/// `max(clip x tile pixels / 256, 1)` with the excess spread evenly (the remainder one count at a
+/// time at a regular step), its cumulative histogram scaled to 0..255 is the tile's table, and every
+/// pixel blends the tables of its four nearest tile centres bilinearly. Matches
+/// `cv2.createCLAHE(clip, (8, 8)).apply` to within one level (checked on real frames).
+pub fn clahe(plane: &[u8], w: usize, h: usize, clip: f64, tiles: usize) -> Vec<u8> {
+    // OpenCV pads only when a side is not a multiple of the grid, and then pads both sides by
+    // `tiles - n % tiles`, a whole extra tile for a side that was already a multiple.
+    let (pw, ph) = if w % tiles == 0 && h % tiles == 0 {
+        (w, h)
+    } else {
+        (w + tiles - w % tiles, h + tiles - h % tiles)
+    };
+    let (tw, th) = ((pw / tiles).max(1), (ph / tiles).max(1));
+    let at = |x: usize, y: usize| plane[reflect_index(y, h) * w + reflect_index(x, w)];
+    let area = (tw * th) as f64;
+    let limit = ((clip * area / 256.0) as usize).max(1);
+    let scale = 255.0 / area;
+    let luts: Vec<[u8; 256]> = (0..tiles * tiles)
+        .into_par_iter()
+        .map(|t| {
+            let (tx, ty) = (t % tiles, t / tiles);
+            let mut hist = [0usize; 256];
+            for y in ty * th..(ty + 1) * th {
+                for x in tx * tw..(tx + 1) * tw {
+                    hist[at(x, y) as usize] += 1;
+                }
+            }
+            let mut clipped = 0;
+            for b in hist.iter_mut() {
+                if *b > limit {
+                    clipped += *b - limit;
+                    *b = limit;
+                }
+            }
+            let batch = clipped / 256;
+            let mut residual = clipped - batch * 256;
+            for b in hist.iter_mut() {
+                *b += batch;
+            }
+            if residual > 0 {
+                let step = (256 / residual).max(1);
+                let mut i = 0;
+                while i < 256 && residual > 0 {
+                    hist[i] += 1;
+                    residual -= 1;
+                    i += step;
+                }
+            }
+            let mut lut = [0u8; 256];
+            let mut sum = 0usize;
+            for (v, b) in hist.iter().enumerate() {
+                sum += b;
+                lut[v] = (sum as f64 * scale).round().min(255.0) as u8;
+            }
+            lut
+        })
+        .collect();
+    let (inv_tw, inv_th) = (1.0 / tw as f32, 1.0 / th as f32);
+    let coord = |p: usize, inv: f32| {
+        let f = p as f32 * inv - 0.5;
+        let t1 = f.floor() as i64;
+        let a = f - t1 as f32;
+        let (t1c, t2c) = (
+            t1.clamp(0, tiles as i64 - 1) as usize,
+            (t1 + 1).clamp(0, tiles as i64 - 1) as usize,
+        );
+        (t1c, t2c, a)
+    };
+    let xs: Vec<(usize, usize, f32)> = (0..w).map(|x| coord(x, inv_tw)).collect();
+    let mut out = vec![0u8; w * h];
+    out.par_chunks_mut(w.max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
+            let (ty1, ty2, ya) = coord(y, inv_th);
+            for (x, o) in row.iter_mut().enumerate() {
+                let (tx1, tx2, xa) = xs[x];
+                let v = plane[y * w + x] as usize;
+                let l = |tx: usize, ty: usize| luts[ty * tiles + tx][v] as f32;
+                let top = l(tx1, ty1) * (1.0 - xa) + l(tx2, ty1) * xa;
+                let bot = l(tx1, ty2) * (1.0 - xa) + l(tx2, ty2) * xa;
+                *o = (top * (1.0 - ya) + bot * ya).round().clamp(0.0, 255.0) as u8;
+            }
+        });
+    out
+}
+
+/// Reflect-101 for indices past the end only (padding to whole tiles is on the bottom and right).
+fn reflect_index(i: usize, n: usize) -> usize {
+    super::ops::reflect101(i as i64, n)
+}
+
+/// C-F3 histogram_equalization: CLAHE (see [`clahe`]) on the HSV value channel, hue and saturation
+/// kept (the channels are rescaled to the new value, see [`super::ops::map_value`]): local contrast
+/// is boosted, noise in dark flat areas too. Works on mono8 (the single channel is the value).
+pub struct HistogramEqualization {
+    clip: f64,
+}
+
+/// Registry constructor of C-F3.
+pub const HISTOGRAM_EQUALIZATION: CameraBuilder = |s| {
+    Ok(Box::new(HistogramEqualization {
+        clip: CLAHE_CLIP[s.level()],
+    }))
+};
+
+impl CameraPerturbation for HistogramEqualization {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
+        let (w, h, c) = (
+            input.width as usize,
+            input.height as usize,
+            input.format.channels(),
+        );
+        let [ri, gi, bi] = input.format.rgb_offsets();
+        let mut v = vec![0u8; w * h];
+        v.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+            for (d, p) in row.iter_mut().zip(input.row(y).chunks_exact(c)) {
+                *d = p[ri].max(p[gi]).max(p[bi]);
+            }
+        });
+        let eq = clahe(&v, w, h, self.clip, 8);
+        map_value(input, output, |y, x, _| eq[y * w + x]);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -343,6 +474,33 @@ mod tests {
             "{:?}",
             &mild.data[..3]
         );
+    }
+
+    #[test]
+    fn clahe_behaves_as_opencv() {
+        // A low-contrast ramp: CLAHE spreads its values; higher clip limits spread them more.
+        let (w, h) = (64, 64);
+        let plane: Vec<u8> = (0..w * h).map(|i| 100 + ((i % w) / 8) as u8).collect();
+        let spread = |clip| {
+            let o = clahe(&plane, w, h, clip, 8);
+            let (mn, mx) = (
+                o.iter().min().copied().unwrap(),
+                o.iter().max().copied().unwrap(),
+            );
+            // Along a row the mapping keeps the order of the input values.
+            let row = &o[32 * w..33 * w];
+            assert!(row.windows(2).all(|p| p[0] <= p[1] + 1), "{row:?}");
+            (mx - mn) as i32
+        };
+        // The 8-value ramp stays 6-7 levels wide (OpenCV gives spreads 6 and 7 for clips 1 and 10):
+        // within each tile the ramp has one value per column band, so clipping limits the gain.
+        let (s1, s10) = (spread(1.0), spread(10.0));
+        assert!((5..=7).contains(&s1) && s10 >= s1, "{s1} {s10}");
+        // A random plane is stretched to the full range, as OpenCV does.
+        let mut r = crate::rng::Rng::for_setup(4, 4);
+        let noise: Vec<u8> = (0..100 * 75).map(|_| 40 + r.below(160) as u8).collect();
+        let o = clahe(&noise, 100, 75, 3.0, 8);
+        assert!(o.iter().max().unwrap() - o.iter().min().unwrap() > 230);
     }
 
     #[test]
