@@ -220,7 +220,7 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("C-E6", "object_overlay", Camera, "pattern", Missing, "PerturbationDrive object_overlay", "An opaque object (sticker, sign) covering the centre"),
     // ---- Camera: colour and tone
     entry!("C-F1", "false_color", Camera, "color", Builder::Camera(camera::color::FALSE_COLOR), "PerturbationDrive false_color_filter", "Channel swaps, inversion and channel mixing"),
-    entry!("C-F2", "phase_scrambling", Camera, "color", Missing, "PerturbationDrive phase_scrambling", "Fourier phase noise that keeps the power spectrum"),
+    entry!("C-F2", "phase_scrambling", Camera, "color", Builder::Camera(camera::color::PHASE_SCRAMBLING), "PerturbationDrive phase_scrambling", "Fourier phase noise that keeps the power spectrum"),
     entry!("C-F3", "histogram_equalization", Camera, "color", Builder::Camera(camera::color::HISTOGRAM_EQUALIZATION), "PerturbationDrive histogram_equalisation", "CLAHE on brightness: local contrast boost"),
     entry!("C-F4", "white_balance", Camera, "color", Builder::Camera(camera::color::WHITE_BALANCE), "PerturbationDrive white_balance_filter", "Gray-world white balance shift"),
     entry!("C-F5", "grayscale", Camera, "color", Builder::Camera(camera::color::GRAYSCALE), "PerturbationDrive grayscale_filter", "Colour loss: blend towards the BT.601 luma"),

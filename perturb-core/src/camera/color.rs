@@ -386,6 +386,163 @@ impl CameraPerturbation for HistogramEqualization {
     }
 }
 
+/// C-F2 phase_scrambling: phase noise amplitude s (in units of pi), severities 1..5
+/// (PerturbationDrive `phase_scrambling`).
+pub const PHASE_SCRAMBLE: [f32; 5] = [0.05, 0.15, 0.26, 0.38, 0.55];
+
+/// C-F2 phase_scrambling: per colour channel, the 2-D Fourier transform F of the frame gets a random
+/// phase `theta_k = s pi U(0, 1)` added at every frequency bin (drawn anew each frame from (seed,
+/// sequence number)), and the output is `clip(Re IFFT(F e^(i theta)))`: the power spectrum is kept,
+/// the spatial structure is scrambled.
+///
+/// The reference's phases are not Hermitian-symmetric, so it keeps the real part of a complex
+/// result. The real part equals the inverse transform of `F M` with `M_k = (e^(i theta_k) +
+/// e^(-i theta_-k)) / 2`, which is Hermitian: this implementation multiplies the half spectrum of a
+/// real FFT by `M` and computes exactly the reference's output at half the cost. Frame sizes with
+/// large prime factors transform more slowly (rustfft chooses Rader / Bluestein); the FFT plans are
+/// built at configuration time.
+pub struct PhaseScrambling {
+    seed: u64,
+    s: f32,
+    plan: FftPlan,
+}
+
+struct FftPlan {
+    w: usize,
+    h: usize,
+    r2c: std::sync::Arc<dyn realfft::RealToComplex<f32>>,
+    c2r: std::sync::Arc<dyn realfft::ComplexToReal<f32>>,
+    col_fwd: std::sync::Arc<dyn rustfft::Fft<f32>>,
+    col_inv: std::sync::Arc<dyn rustfft::Fft<f32>>,
+}
+
+/// Registry constructor of C-F2.
+pub const PHASE_SCRAMBLING: CameraBuilder = |s| {
+    let (w, h) = (
+        s.geometry.width.max(1) as usize,
+        s.geometry.height.max(1) as usize,
+    );
+    let mut real = realfft::RealFftPlanner::<f32>::new();
+    let mut cplx = rustfft::FftPlanner::<f32>::new();
+    Ok(Box::new(PhaseScrambling {
+        seed: s.seed,
+        s: PHASE_SCRAMBLE[s.level()],
+        plan: FftPlan {
+            w,
+            h,
+            r2c: real.plan_fft_forward(w),
+            c2r: real.plan_fft_inverse(w),
+            col_fwd: cplx.plan_fft_forward(h),
+            col_inv: cplx.plan_fft_inverse(h),
+        },
+    }))
+};
+
+impl PhaseScrambling {
+    /// The uniform draws of spectrum row `ky` of `channel` for frame `seq` (full width).
+    fn phases(&self, seq: u64, channel: usize, ky: usize, w: usize) -> Vec<f32> {
+        let mut rng = super::ops::row_rng(self.seed, seq, 0xF2 + ((channel as u64) << 32), ky);
+        (0..w)
+            .map(|_| rng.f32() * self.s * std::f32::consts::PI)
+            .collect()
+    }
+
+    /// Scrambles one channel plane (h x w, row-major) in place.
+    fn scramble(&self, plane: &mut [f32], seq: u64, channel: usize) {
+        use rustfft::num_complex::Complex32;
+        let FftPlan { w, h, .. } = self.plan;
+        let wh = w / 2 + 1;
+        // Rows: real to complex.
+        let mut spec = vec![Complex32::new(0.0, 0.0); h * wh];
+        let mut scratch = self.plan.r2c.make_scratch_vec();
+        for (row, out) in plane.chunks_exact_mut(w).zip(spec.chunks_exact_mut(wh)) {
+            self.plan
+                .r2c
+                .process_with_scratch(row, out, &mut scratch)
+                .expect("sizes match the plan");
+        }
+        // Columns: transpose so each column is contiguous, forward FFT.
+        let mut cols = vec![Complex32::new(0.0, 0.0); wh * h];
+        for y in 0..h {
+            for x in 0..wh {
+                cols[x * h + y] = spec[y * wh + x];
+            }
+        }
+        for col in cols.chunks_exact_mut(h) {
+            self.plan.col_fwd.process(col);
+        }
+        // Multiply by M_k = (e^(i theta_k) + e^(-i theta_-k)) / 2.
+        for ky in 0..h {
+            let nky = (h - ky) % h;
+            let here = self.phases(seq, channel, ky, w);
+            let there = self.phases(seq, channel, nky, w);
+            for kx in 0..wh {
+                let nkx = (w - kx) % w;
+                let (a, b) = (here[kx], there[nkx]);
+                let m = Complex32::new((a.cos() + b.cos()) * 0.5, (a.sin() - b.sin()) * 0.5);
+                cols[kx * h + ky] *= m;
+            }
+        }
+        for col in cols.chunks_exact_mut(h) {
+            self.plan.col_inv.process(col);
+        }
+        for y in 0..h {
+            for x in 0..wh {
+                spec[y * wh + x] = cols[x * h + y];
+            }
+        }
+        // The DC and Nyquist bins of a real signal's rows must be real for the inverse transform.
+        let mut scratch = self.plan.c2r.make_scratch_vec();
+        let norm = 1.0 / (w * h) as f32;
+        for (row, out) in spec.chunks_exact_mut(wh).zip(plane.chunks_exact_mut(w)) {
+            row[0].im = 0.0;
+            if w % 2 == 0 {
+                row[wh - 1].im = 0.0;
+            }
+            self.plan
+                .c2r
+                .process_with_scratch(row, out, &mut scratch)
+                .expect("sizes match the plan");
+            for v in out.iter_mut() {
+                *v *= norm;
+            }
+        }
+    }
+}
+
+impl CameraPerturbation for PhaseScrambling {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
+        let (w, h) = (input.width as usize, input.height as usize);
+        let format = input.format;
+        let c = format.channels();
+        let colour: Vec<usize> = if format.is_mono() {
+            vec![0]
+        } else {
+            format.rgb_offsets().to_vec()
+        };
+        let planes: Vec<Vec<f32>> = colour
+            .par_iter()
+            .enumerate()
+            .map(|(k, &ch)| {
+                let mut plane: Vec<f32> = (0..h)
+                    .flat_map(|y| input.row(y).iter().skip(ch).step_by(c).map(|&v| v as f32))
+                    .collect();
+                self.scramble(&mut plane, seq, k);
+                plane
+            })
+            .collect();
+        par_rows(input, output, |y, src, dst| {
+            for (plane, &ch) in planes.iter().zip(&colour) {
+                let row = &plane[y * w..(y + 1) * w];
+                for (x, v) in row.iter().enumerate() {
+                    dst[x * c + ch] = (v + 0.5).clamp(0.0, 255.0) as u8;
+                }
+            }
+            super::ops::copy_alpha(format, src, dst);
+        });
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -501,6 +658,36 @@ mod tests {
         let noise: Vec<u8> = (0..100 * 75).map(|_| 40 + r.below(160) as u8).collect();
         let o = clahe(&noise, 100, 75, 3.0, 8);
         assert!(o.iter().max().unwrap() - o.iter().min().unwrap() > 230);
+    }
+
+    #[test]
+    fn phase_scrambling_keeps_the_mean_and_scrambles_more_with_severity() {
+        let img = crate::synthetic::street_image(96, 60, 0);
+        let mean = |i: &Image| i.data.iter().map(|&v| v as f64).sum::<f64>() / i.data.len() as f64;
+        let mad = |o: &Image| {
+            o.data
+                .iter()
+                .zip(&img.data)
+                .map(|(a, b)| (*a as f64 - *b as f64).abs())
+                .sum::<f64>()
+                / o.data.len() as f64
+        };
+        let mut last = 0.0;
+        for s in 1..=5 {
+            let p = PHASE_SCRAMBLING(&CameraSetup {
+                severity: s,
+                seed: 2,
+                geometry: img.geometry(),
+            })
+            .unwrap();
+            let mut out = Image::with_geometry(img.geometry());
+            p.apply(&img.view(), &mut out.view_mut(), 0);
+            // The DC bin keeps its magnitude up to cos(theta_0): the mean changes little.
+            assert!((mean(&out) - mean(&img)).abs() < 0.1 * mean(&img), "s{s}");
+            let d = mad(&out);
+            assert!(d > last, "s{s}: {d} <= {last}");
+            last = d;
+        }
     }
 
     #[test]
