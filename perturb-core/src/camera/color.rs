@@ -269,7 +269,7 @@ pub const CLAHE_CLIP: [f64; 5] = [1.0, 3.0, 5.0, 7.0, 10.0];
 pub fn clahe(plane: &[u8], w: usize, h: usize, clip: f64, tiles: usize) -> Vec<u8> {
     // OpenCV pads only when a side is not a multiple of the grid, and then pads both sides by
     // `tiles - n % tiles`, a whole extra tile for a side that was already a multiple.
-    let (pw, ph) = if w % tiles == 0 && h % tiles == 0 {
+    let (pw, ph) = if w.is_multiple_of(tiles) && h.is_multiple_of(tiles) {
         (w, h)
     } else {
         (w + tiles - w % tiles, h + tiles - h % tiles)
@@ -301,8 +301,8 @@ pub fn clahe(plane: &[u8], w: usize, h: usize, clip: f64, tiles: usize) -> Vec<u
             for b in hist.iter_mut() {
                 *b += batch;
             }
-            if residual > 0 {
-                let step = (256 / residual).max(1);
+            if let Some(step) = 256usize.checked_div(residual) {
+                let step = step.max(1);
                 let mut i = 0;
                 while i < 256 && residual > 0 {
                     hist[i] += 1;
