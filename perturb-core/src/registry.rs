@@ -212,12 +212,12 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("C-D3", "sample_pairing", Camera, "distortion", Builder::Camera(camera::distortion::SAMPLE_PAIRING), "PerturbationDrive sample_pairing_filter", "Blend with an enlarged random crop of the same frame"),
     entry!("C-D4", "sharpen", Camera, "distortion", Builder::Camera(camera::distortion::SHARPEN_BUILDER), "PerturbationDrive sharpen_filter", "Over-sharpening with an unnormalised Laplacian kernel"),
     // ---- Camera: patterns
-    entry!("C-E1", "splatter", Camera, "pattern", Missing, "PerturbationDrive splatter_mapping", "Black blobs of dirt on the lens"),
-    entry!("C-E2", "dotted_lines", Camera, "pattern", Missing, "PerturbationDrive dotted_lines_mapping", "Dotted black lines across the image"),
-    entry!("C-E3", "zigzag", Camera, "pattern", Missing, "PerturbationDrive zigzag_mapping", "Zig-zag black scratches"),
-    entry!("C-E4", "canny_edges", Camera, "pattern", Missing, "PerturbationDrive canny_edges_mapping", "Canny edge overlay on a dimmed image"),
-    entry!("C-E5", "cutout", Camera, "pattern", Missing, "PerturbationDrive cutout_filter", "Black rectangles occluding parts of the image"),
-    entry!("C-E6", "object_overlay", Camera, "pattern", Missing, "PerturbationDrive object_overlay", "An opaque object (sticker, sign) covering the centre"),
+    entry!("C-E1", "splatter", Camera, "pattern", Builder::Camera(camera::pattern::SPLATTER_BUILDER), "PerturbationDrive splatter_mapping", "Black blobs of dirt on the lens"),
+    entry!("C-E2", "dotted_lines", Camera, "pattern", Builder::Camera(camera::pattern::DOTTED_LINES_BUILDER), "PerturbationDrive dotted_lines_mapping", "Dotted black lines across the image"),
+    entry!("C-E3", "zigzag", Camera, "pattern", Builder::Camera(camera::pattern::ZIGZAG_BUILDER), "PerturbationDrive zigzag_mapping", "Zig-zag black scratches"),
+    entry!("C-E4", "canny_edges", Camera, "pattern", Builder::Camera(camera::pattern::CANNY_BUILDER), "PerturbationDrive canny_edges_mapping", "Canny edge overlay on a dimmed image"),
+    entry!("C-E5", "cutout", Camera, "pattern", Builder::Camera(camera::pattern::CUTOUT_BUILDER), "PerturbationDrive cutout_filter", "Black rectangles occluding parts of the image"),
+    entry!("C-E6", "object_overlay", Camera, "pattern", Builder::Camera(camera::pattern::OBJECT_OVERLAY), "PerturbationDrive object_overlay", "An opaque object (sticker, sign) covering the centre"),
     // ---- Camera: colour and tone
     entry!("C-F1", "false_color", Camera, "color", Builder::Camera(camera::color::FALSE_COLOR), "PerturbationDrive false_color_filter", "Channel swaps, inversion and channel mixing"),
     entry!("C-F2", "phase_scrambling", Camera, "color", Builder::Camera(camera::color::PHASE_SCRAMBLING), "PerturbationDrive phase_scrambling", "Fourier phase noise that keeps the power spectrum"),

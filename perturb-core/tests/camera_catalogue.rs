@@ -150,9 +150,16 @@ fn changes_a_real_frame_at_every_severity() {
             let mut p = CameraPerturber::new(e.id, s, 77).unwrap();
             let out = run(&mut p, &frame.view(), 0).unwrap();
             let d = mean_abs_diff(&frame, &out);
+            let changed = frame
+                .data
+                .iter()
+                .zip(&out.data)
+                .filter(|(a, b)| a != b)
+                .count();
+            // The mildest settings (a few small blobs) touch well under 1% of the frame.
             assert!(
-                d > 0.05,
-                "{} s{s}: output is (almost) the input, mean abs diff {d:.4}",
+                changed * 10_000 >= frame.data.len() && d > 0.005,
+                "{} s{s}: output is (almost) the input: {changed} bytes changed, mean abs diff {d:.4}",
                 e.id
             );
         }
