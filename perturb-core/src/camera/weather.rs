@@ -312,7 +312,11 @@ pub fn diamond_square_fog(seed: u64, w: usize, h: usize) -> Vec<u8> {
         }
         // Square step: edge midpoints, averaging the neighbours that exist.
         for y in (0..size).step_by(half) {
-            let start = if (y / half).is_multiple_of(2) { half } else { 0 };
+            let start = if (y / half).is_multiple_of(2) {
+                half
+            } else {
+                0
+            };
             for x in (start..size).step_by(step) {
                 let mut sum = 0.0;
                 let mut cnt = 0.0;

@@ -1,1 +1,0 @@
-//! Weather family (L-A): snow, rain, fog and sunlight, physics-based and lightweight.
