@@ -34,10 +34,14 @@
 //! | DBSCAN | eps 0.7 m, min_samples 4, in x, y, z | `release` (683f27e: 0.6 m in x, y) |
 //! | min cluster size | 4 | `release` |
 //! | boxes | minimum-area | 683f27e (`release` default: axis-aligned) |
+//! | size limit | none | as both versions ([`DetectorConfig::objects`] adds one) |
 //!
 //! Changed from `release`: the boxes are minimum-area by default, because the object-level
 //! perturbations need a heading (L-E3 rotates about it, L-F2 and L-F3 move along it); the ego box of
 //! the newer version is removed so that a roof-mounted sensor does not detect its own vehicle.
+//! The object-level perturbations use [`DetectorConfig::objects`], which also drops clusters too
+//! large to be a road user (walls, building fronts, hedges); [`DetectorConfig::default`] keeps
+//! every cluster, as Autoware Mini does.
 //!
 //! Deviations from the reference code (deliberate, each for a stated reason):
 //! - The reference fills empty cells with NaN and calls `cv2.blur`; a box filter over NaN returns
@@ -137,6 +141,29 @@ pub struct DetectorConfig {
     pub min_cluster_size: usize,
     /// Box fitting.
     pub box_fit: BoxFit,
+    /// Boxes longer than this (the longer footprint side, metres) are dropped. Not in Autoware
+    /// Mini (infinite in [`DetectorConfig::default`]); see [`DetectorConfig::objects`].
+    pub max_length: f32,
+    /// Boxes with a larger footprint (length x width, m^2) are dropped. Not in Autoware Mini
+    /// (infinite in [`DetectorConfig::default`]); see [`DetectorConfig::objects`].
+    pub max_area: f32,
+}
+
+impl DetectorConfig {
+    /// The configuration of the object-level perturbations' boxes: the reference defaults plus a
+    /// size limit that drops the clusters no road user has: footprints longer than 20 m (a long
+    /// articulated bus is about 18.75 m) or larger than 50 m^2 (the area above which Autoware
+    /// Mini 683f27e stops describing a cluster by its box and uses its concave hull). Without the
+    /// limit, the boxes of building fronts, hedges and long walls cover large parts of a street
+    /// scan and the ground inside them (on KITTI 000000 one such box holds 31 % of the scan), and
+    /// the "object-level" perturbations would act on them.
+    pub fn objects() -> Self {
+        DetectorConfig {
+            max_length: 20.0,
+            max_area: 50.0,
+            ..DetectorConfig::default()
+        }
+    }
 }
 
 impl Default for DetectorConfig {
@@ -159,6 +186,8 @@ impl Default for DetectorConfig {
             cluster_2d: false,
             min_cluster_size: 4,
             box_fit: BoxFit::MinArea,
+            max_length: f32::INFINITY,
+            max_area: f32::INFINITY,
         }
     }
 }
@@ -667,6 +696,10 @@ impl Detector {
                     min_area_rect(&self.hull)
                 }
             };
+            let long = size[0].max(size[1]);
+            if long > self.config.max_length || size[0] * size[1] > self.config.max_area {
+                continue;
+            }
             out.push(Box3 {
                 center: [center[0], center[1], 0.5 * (zmin + zmax)],
                 size: [size[0], size[1], zmax - zmin],
@@ -1080,6 +1113,40 @@ mod tests {
             // The bottom layer of each blob is its cells' minimum, hence ground.
             assert!((b.size[2] - 0.5).abs() < 1e-5 && b.yaw == 0.0);
         }
+    }
+
+    #[test]
+    fn object_config_drops_walls_but_keeps_cars() {
+        let mut v = Vec::new();
+        // A 30 m x 0.3 m wall along y = 8 and a 4 x 2 m car body at (12, -3).
+        for i in 0..300 {
+            for k in 0..6 {
+                v.push([i as f32 * 0.1 - 5.0, 8.0, -1.5 + k as f32 * 0.25]);
+                v.push([i as f32 * 0.1 - 5.0, 8.3, -1.5 + k as f32 * 0.25]);
+            }
+        }
+        for i in 0..=40 {
+            for k in 0..6 {
+                let z = -1.5 + k as f32 * 0.2;
+                v.push([10.0 + i as f32 * 0.1, -4.0, z]);
+                v.push([10.0 + i as f32 * 0.1, -2.0, z]);
+                v.push([10.0, -4.0 + i as f32 * 0.05, z]);
+            }
+        }
+        // The road under both.
+        for i in 0..110 {
+            for j in 0..55 {
+                v.push([-6.0 + i as f32 * 0.3, -6.0 + j as f32 * 0.3, -1.8]);
+            }
+        }
+        let p = pts(&v);
+        let all = Detector::new(DetectorConfig::default()).detect(&p);
+        let objects = Detector::new(DetectorConfig::objects()).detect(&p);
+        assert_eq!(all.len(), 2);
+        assert_eq!(objects.len(), 1);
+        assert!(
+            (objects[0].center[0] - 12.0).abs() < 0.1 && (objects[0].size[0] - 4.0).abs() < 0.1
+        );
     }
 
     #[test]

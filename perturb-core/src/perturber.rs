@@ -157,7 +157,7 @@ impl CameraPerturber {
 ///
 /// Object-level perturbations (L-D, L-E, L-F2, L-F3) act on the points inside object boxes. The
 /// caller may supply the boxes per cloud; when it does not, the perturber runs its clustering
-/// [`Detector`] (built once, with [`DetectorConfig::default`] unless
+/// [`Detector`] (built once, with [`DetectorConfig::objects`] unless
 /// [`LidarPerturber::set_detector`] says otherwise) on the **unperturbed** cloud.
 pub struct LidarPerturber {
     spec: Spec,
@@ -203,7 +203,7 @@ impl LidarPerturber {
         let detector = perturbation
             .needs()
             .boxes
-            .then(|| Detector::new(DetectorConfig::default()));
+            .then(|| Detector::new(DetectorConfig::objects()));
         Ok(LidarPerturber {
             spec,
             sensor,
@@ -292,7 +292,7 @@ impl LidarPerturber {
                 Some(b) => self.boxes.extend_from_slice(b),
                 None => self
                     .detector
-                    .get_or_insert_with(|| Detector::new(DetectorConfig::default()))
+                    .get_or_insert_with(|| Detector::new(DetectorConfig::objects()))
                     .detect_into(&self.points, &mut self.boxes),
             }
         }
