@@ -17,6 +17,7 @@
 
 use crate::camera::{CameraPerturbation, CameraSetup};
 use crate::cloud::{Cloud, CloudView};
+use crate::detector::{Detector, DetectorConfig};
 use crate::error::{Error, Result};
 use crate::image::{Image, ImageGeometry, ImageView, ImageViewMut};
 use crate::lidar::points::CloudShape;
@@ -153,12 +154,19 @@ impl CameraPerturber {
 }
 
 /// A LiDAR perturbation configured by ID, severity, seed and sensor model.
+///
+/// Object-level perturbations (L-D, L-E, L-F2, L-F3) act on the points inside object boxes. The
+/// caller may supply the boxes per cloud; when it does not, the perturber runs its clustering
+/// [`Detector`] (built once, with [`DetectorConfig::objects`] unless
+/// [`LidarPerturber::set_detector`] says otherwise) on the **unperturbed** cloud.
 pub struct LidarPerturber {
     spec: Spec,
     sensor: SensorModel,
     perturbation: Box<dyn LidarPerturbation>,
     points: Points,
     plan: Plan,
+    detector: Option<Detector>,
+    boxes: Vec<Box3>,
 }
 
 impl std::fmt::Debug for LidarPerturber {
@@ -192,13 +200,33 @@ impl LidarPerturber {
                 });
             }
         };
+        let detector = perturbation
+            .needs()
+            .boxes
+            .then(|| Detector::new(DetectorConfig::objects()));
         Ok(LidarPerturber {
             spec,
             sensor,
             perturbation,
             points: Points::default(),
             plan: Plan::default(),
+            detector,
+            boxes: Vec::new(),
         })
+    }
+
+    /// Replaces the detector that supplies boxes when the caller gives none (object-level
+    /// perturbations only; the others never run it).
+    pub fn set_detector(&mut self, config: DetectorConfig) {
+        if self.perturbation.needs().boxes {
+            self.detector = Some(Detector::new(config));
+        }
+    }
+
+    /// The boxes the last cloud was perturbed with: the caller's, or the detector's on the
+    /// unperturbed cloud (empty for perturbations that do not use boxes).
+    pub fn last_boxes(&self) -> &[Box3] {
+        &self.boxes
     }
 
     /// The configuration.
@@ -217,7 +245,8 @@ impl LidarPerturber {
     }
 
     /// Perturbs `input` into `out` in the input's layout and returns the output's shape. `boxes`
-    /// are object boxes for the object-level perturbations.
+    /// are object boxes for the object-level perturbations; `None` lets the built-in detector find
+    /// them on `input` (before it is perturbed).
     pub fn apply(
         &mut self,
         input: &CloudView<'_>,
@@ -257,21 +286,25 @@ impl LidarPerturber {
     ) -> Result<()> {
         let needs = self.perturbation.needs();
         self.points.fill(input, &self.sensor, needs.ring)?;
-        let boxes = match boxes {
-            Some(b) => b,
-            None if needs.boxes => {
-                return Err(Error::InvalidConfig {
-                    reason: format!(
-                        "{} acts on object boxes and none were given for this cloud",
-                        self.spec.entry.id
-                    ),
-                });
+        self.boxes.clear();
+        if needs.boxes {
+            match boxes {
+                Some(b) => self.boxes.extend_from_slice(b),
+                None => self
+                    .detector
+                    .get_or_insert_with(|| Detector::new(DetectorConfig::objects()))
+                    .detect_into(&self.points, &mut self.boxes),
             }
-            None => &[],
-        };
+        }
         self.plan.clear();
-        self.perturbation
-            .plan(&self.points, &LidarFrame { seq, boxes }, &mut self.plan);
+        self.perturbation.plan(
+            &self.points,
+            &LidarFrame {
+                seq,
+                boxes: &self.boxes,
+            },
+            &mut self.plan,
+        );
         Ok(())
     }
 }

@@ -250,19 +250,19 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("L-C2", "uniform_noise", Lidar, "noise", Builder::Lidar(lidar::noise::UNIFORM), "3D-Corruptions-AD uniform_noise", "Uniform jitter on every point"),
     entry!("L-C3", "impulse_noise", Lidar, "noise", Builder::Lidar(lidar::noise::IMPULSE), "3D-Corruptions-AD impulse_noise", "A fraction of points displaced by a fixed step"),
     // ---- LiDAR: local (object-level)
-    entry!("L-D1", "local_density_decrease", Lidar, "local", Missing, "3D-Corruptions-AD density_dec_bbox", "Points of detected objects thinned"),
-    entry!("L-D2", "local_cutout", Lidar, "local", Missing, "3D-Corruptions-AD cutout_bbox", "A part of each detected object cut away"),
-    entry!("L-D3", "local_gaussian_noise", Lidar, "local", Missing, "3D-Corruptions-AD gaussian_noise_bbox", "Gaussian jitter on the points of detected objects"),
-    entry!("L-D4", "local_uniform_noise", Lidar, "local", Missing, "3D-Corruptions-AD uniform_noise_bbox", "Uniform jitter on the points of detected objects"),
-    entry!("L-D5", "local_impulse_noise", Lidar, "local", Missing, "3D-Corruptions-AD impulse_noise_bbox", "Impulse displacement of points of detected objects"),
+    entry!("L-D1", "local_density_decrease", Lidar, "local", Builder::Lidar(lidar::local::LOCAL_DENSITY), "3D-Corruptions-AD density_dec_bbox", "Points of detected objects thinned"),
+    entry!("L-D2", "local_cutout", Lidar, "local", Builder::Lidar(lidar::local::LOCAL_CUTOUT), "3D-Corruptions-AD cutout_bbox", "A part of each detected object cut away"),
+    entry!("L-D3", "local_gaussian_noise", Lidar, "local", Builder::Lidar(lidar::local::LOCAL_GAUSSIAN), "3D-Corruptions-AD gaussian_noise_bbox", "Gaussian jitter on the points of detected objects"),
+    entry!("L-D4", "local_uniform_noise", Lidar, "local", Builder::Lidar(lidar::local::LOCAL_UNIFORM), "3D-Corruptions-AD uniform_noise_bbox", "Uniform jitter on the points of detected objects"),
+    entry!("L-D5", "local_impulse_noise", Lidar, "local", Builder::Lidar(lidar::local::LOCAL_IMPULSE), "3D-Corruptions-AD impulse_noise_bbox", "Impulse displacement of points of detected objects"),
     // ---- LiDAR: affine (object-level)
-    entry!("L-E1", "shear", Lidar, "affine", Missing, "3D-Corruptions-AD shear_bbox", "Detected objects sheared inside their boxes"),
-    entry!("L-E2", "scale", Lidar, "affine", Missing, "3D-Corruptions-AD scale_bbox", "Detected objects stretched or squeezed along one axis"),
-    entry!("L-E3", "rotation", Lidar, "affine", Missing, "3D-Corruptions-AD rotation_bbox", "Detected objects rotated about their vertical axis"),
+    entry!("L-E1", "shear", Lidar, "affine", Builder::Lidar(lidar::affine::SHEAR), "3D-Corruptions-AD shear_bbox", "Detected objects sheared inside their boxes"),
+    entry!("L-E2", "scale", Lidar, "affine", Builder::Lidar(lidar::affine::SCALE), "3D-Corruptions-AD scale_bbox", "Detected objects stretched or squeezed along one axis"),
+    entry!("L-E3", "rotation", Lidar, "affine", Builder::Lidar(lidar::affine::ROTATION), "3D-Corruptions-AD rotation_bbox", "Detected objects rotated about their vertical axis"),
     // ---- LiDAR: motion and alignment
     entry!("L-F1", "motion_blur", Lidar, "motion", Builder::Lidar(lidar::motion::MOTION_BLUR), "MultiCorrupt pts_motion", "Ego-motion smear: a global shift plus per-point jitter"),
-    entry!("L-F2", "moving_object", Lidar, "motion", Missing, "3D-Corruptions-AD moving_noise_bbox", "Detected objects smeared as if moving during the sweep"),
-    entry!("L-F3", "ghost_points", Lidar, "motion", Missing, "project's own", "Displaced, dimmer copies of the points of detected objects"),
+    entry!("L-F2", "moving_object", Lidar, "motion", Builder::Lidar(lidar::motion::MOVING_OBJECT), "3D-Corruptions-AD moving_noise_bbox", "Detected objects smeared as if moving during the sweep"),
+    entry!("L-F3", "ghost_points", Lidar, "motion", Builder::Lidar(lidar::motion::GHOST_POINTS), "project's own", "Displaced, dimmer copies of the points of detected objects"),
     entry!("L-F4", "spatial_misalignment", Lidar, "motion", Builder::Lidar(lidar::motion::MISALIGNMENT_BUILDER), "MultiCorrupt transform_points", "Extrinsic calibration error: a rigid rotation and shift"),
 ];
 

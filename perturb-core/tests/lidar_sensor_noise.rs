@@ -5,7 +5,7 @@ mod common;
 
 use perturb_core::cloud::{Cloud, PointLayout};
 use perturb_core::lidar::Points;
-use perturb_core::lidar::motion::{MISALIGNMENT, rotation_xyz};
+use perturb_core::lidar::motion::MISALIGNMENT;
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::sensors::SensorModel;
 
@@ -213,7 +213,22 @@ fn misalignment_is_the_reference_transform_on_a_fraction_of_the_clouds() {
     let s = SensorModel::vlp32c();
     let orig = pts(&c, &s, false);
     for (sev, (p, deg)) in MISALIGNMENT.iter().enumerate() {
-        let r = rotation_xyz(deg.to_radians());
+        // MultiCorrupt's transform_points, written out: M = Rx Ry Rz with its own sign
+        // convention, applied as xyz . M^T (so p' = M p), then + [2, 0, 0].
+        let (s_, c_) = (deg.to_radians().sin(), deg.to_radians().cos());
+        let rx = [[1.0, 0.0, 0.0], [0.0, c_, s_], [0.0, -s_, c_]];
+        let ry = [[c_, 0.0, -s_], [0.0, 1.0, 0.0], [s_, 0.0, c_]];
+        let rz = [[c_, s_, 0.0], [-s_, c_, 0.0], [0.0, 0.0, 1.0]];
+        let mul = |a: [[f64; 3]; 3], b: [[f64; 3]; 3]| {
+            let mut o = [[0.0f64; 3]; 3];
+            for i in 0..3 {
+                for j in 0..3 {
+                    o[i][j] = (0..3).map(|k| a[i][k] * b[k][j]).sum();
+                }
+            }
+            o
+        };
+        let r = mul(mul(rx, ry), rz).map(|row| row.map(|v| v as f32));
         let mut hits = 0;
         for seq in 0..400 {
             let out = run("L-F4", sev as u8 + 1, &c, seq, &s);

@@ -9,10 +9,12 @@
 //! | PNG, JPEG | [`picture`] |
 //! | KITTI velodyne `.bin` (float32 x, y, z, reflectance) | [`kitti`] |
 //! | nuScenes `.pcd.bin` (float32 x, y, z, intensity, ring) | [`kitti`] |
+//! | KITTI object labels and calibration (`label_2`, `calib`) | [`kitti_labels`] |
 //! | PCD v0.7 (ascii, binary, binary_compressed; any fields) | [`pcd`] |
 //! | `sensor_msgs/Image`, `CompressedImage`, `PointCloud2` in CDR | [`ros`] |
 
 pub mod kitti;
+pub mod kitti_labels;
 pub mod pcd;
 pub mod picture;
 pub mod ros;

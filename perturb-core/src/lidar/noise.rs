@@ -41,7 +41,10 @@ impl LidarPerturbation for GaussianNoise {
 /// (`uniform_noise`); severities 1, 2, 3 use levels 1, 3, 5.
 pub const UNIFORM_HALF_WIDTH_M: [f64; 5] = [0.02, 0.04, 0.06, 0.08, 0.10];
 
-/// L-C2 uniform_noise: adds independent U(-c, c) to x, y and z of every point (xyz only, as L-C1).
+/// L-C2 uniform_noise: adds independent U(-c, c) to x, y and z of every point.
+///
+/// Deviation from the reference (as L-C1): 3D-Corruptions-AD adds the noise to every column,
+/// intensity and ring included; here only x, y, z move and every other field passes through.
 pub struct UniformNoise {
     seed: u64,
     c: f64,
@@ -71,8 +74,11 @@ impl LidarPerturbation for UniformNoise {
 /// levels 1..5 (`impulse_noise`); severities 1, 2, 3 use levels 1, 3, 5.
 pub const IMPULSE_DIVISOR: [usize; 5] = [30, 25, 20, 15, 10];
 
-/// L-C3 impulse_noise: `N / d` points chosen without replacement move by exactly ±0.1 m on each of
-/// x, y and z (independent random signs). xyz only (the reference also shifts the other columns).
+/// L-C3 impulse_noise: `N / d` (integer division) points chosen without replacement move by exactly
+/// ±0.1 m on each of x, y and z (independent random signs).
+///
+/// Deviation from the reference (as L-C1): 3D-Corruptions-AD shifts every column by ±0.1,
+/// intensity and ring included; here only x, y, z.
 pub struct ImpulseNoise {
     seed: u64,
     divisor: usize,
@@ -108,10 +114,17 @@ impl LidarPerturbation for ImpulseNoise {
 /// (`scene_glare_noise`); severities 1, 2, 3 use levels 1, 3, 5.
 pub const SUNLIGHT_FRACTION: [f64; 5] = [0.01, 0.02, 0.03, 0.04, 0.05];
 
-/// L-A10 strong_sunlight: sunlight saturating the receiver makes some returns unreliable: `c N`
-/// points chosen without replacement get N(0, 2 m) added to x, y and z (xyz only; the reference
-/// also perturbs the other columns). It is in the catalogue's weather family and shares its code
-/// with L-B5 crosstalk.
+/// L-A10 strong_sunlight: sunlight saturating the receiver makes some returns unreliable:
+/// `floor(c N)` points chosen without replacement get N(0, (2 m)^2) added to x, y and z
+/// (3D-Corruptions-AD `scene_glare_noise`, the LiDAR-only variant; the camera-and-LiDAR variant
+/// `ImagePointAddSun` needs the sun's position in a camera image and is not used).
+///
+/// Placement: the catalogue lists it in the weather family, but its algorithm is a noise model
+/// (it is L-B5 crosstalk with sigma 2 m and other fractions), so it lives here, next to the other
+/// noises, and shares its code with L-B5; the weather module holds the physics-based models.
+///
+/// Deviation: the reference adds the noise to every column (intensity and ring too); here to x,
+/// y, z only.
 pub struct StrongSunlight {
     seed: u64,
     fraction: f64,
