@@ -126,8 +126,13 @@ pub struct FogModel {
 pub enum FogOutcome {
     /// The hard target, attenuated (intensity on 0..255).
     Attenuated(f64),
-    /// A fog return at this range with this intensity (0..255).
-    Fog { range: f64, intensity: f64 },
+    /// A fog return.
+    Fog {
+        /// Range of the return in metres.
+        range: f64,
+        /// Intensity on 0..255.
+        intensity: f64,
+    },
 }
 
 impl FogModel {

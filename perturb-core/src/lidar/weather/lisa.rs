@@ -111,10 +111,20 @@ pub const RAIN_LISA: LidarBuilder = |s| Ok(Box::new(build(Precipitation::Rain, s
 pub enum Outcome {
     /// No return above the detection floor.
     Lost,
-    /// Replaced by a particle return at this range with this intensity (0..1).
-    Scattered { range: f64, intensity: f64 },
-    /// The hard target, at this range with this intensity (0..1).
-    Kept { range: f64, intensity: f64 },
+    /// Replaced by a particle return.
+    Scattered {
+        /// Range of the particle in metres.
+        range: f64,
+        /// Reflectance on 0..1.
+        intensity: f64,
+    },
+    /// The hard target, with range noise and attenuation.
+    Kept {
+        /// Range in metres.
+        range: f64,
+        /// Reflectance on 0..1.
+        intensity: f64,
+    },
 }
 
 impl Lisa {
