@@ -128,6 +128,12 @@ pub enum Outcome {
 }
 
 impl Lisa {
+    /// The model of `kind` for a configuration (rain rate from the severity, beam divergence from
+    /// the sensor model).
+    pub fn new(kind: Precipitation, s: &super::super::LidarSetup) -> Self {
+        build(kind, s)
+    }
+
     /// The medium.
     pub fn medium(&self) -> &Medium {
         &self.medium
