@@ -42,9 +42,12 @@ pub enum FastKind {
     Fog,
 }
 
-/// Per model and severity 1..3: (alpha, physics retention on KITTI 000000, fast expected
-/// retention there).
-pub const FAST_CALIBRATION: [(FastKind, [(f64, f64, f64); 3]); 3] = [
+/// One severity's calibration: (alpha, physics retention on KITTI 000000, fast expected retention
+/// there).
+pub type Calibration = (f64, f64, f64);
+
+/// Per model and severity 1..3, the calibration.
+pub const FAST_CALIBRATION: [(FastKind, [Calibration; 3]); 3] = [
     (
         FastKind::Snow,
         [
