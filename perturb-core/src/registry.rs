@@ -229,8 +229,8 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("C-F8", "saturation_decrease", Camera, "color", Builder::Camera(camera::color::SATURATION_DOWN), "PerturbationDrive saturation_decrease_filter", "Washed-out colours: HSV saturation scaled down"),
     // ---- LiDAR: weather
     entry!("L-A1", "snow_lisa", Lidar, "weather", Builder::Lidar(lidar::weather::lisa::SNOW_LISA), "3D-Corruptions-AD snow_sim (LISA, Marshall-Gunn)", "Snowfall by Monte-Carlo scattering of each beam on ice particles (LISA)"),
-    entry!("L-A2", "snow_hahner", Lidar, "weather", Missing, "3D-Corruptions-AD snow_sim_nus (Hahner + wet ground)", "Physics snowfall: per-beam snowflake occlusion and wet ground"),
-    entry!("L-A3", "snow_multicorrupt", Lidar, "weather", Missing, "MultiCorrupt simulate_snow", "Hahner snowfall with MultiCorrupt's parameters, no wet ground"),
+    entry!("L-A2", "snow_hahner", Lidar, "weather", Builder::Lidar(lidar::weather::snow::SNOW_HAHNER), "3D-Corruptions-AD snow_sim_nus (Hahner + wet ground)", "Physics snowfall: per-beam snowflake occlusion and wet ground"),
+    entry!("L-A3", "snow_multicorrupt", Lidar, "weather", Builder::Lidar(lidar::weather::snow::SNOW_MULTICORRUPT), "MultiCorrupt simulate_snow", "Hahner snowfall with MultiCorrupt's parameters, no wet ground"),
     entry!("L-A4", "snow_fast", Lidar, "weather", Builder::Lidar(lidar::weather::fast::SNOW_FAST), "lightweight approximation (paper)", "Constant-time snow: distance and intensity attenuation, point removal, near-field flakes"),
     entry!("L-A5", "rain_lisa", Lidar, "weather", Builder::Lidar(lidar::weather::lisa::RAIN_LISA), "3D-Corruptions-AD rain_sim (LISA, Marshall-Palmer)", "Rainfall by Monte-Carlo scattering of each beam on water drops (LISA)"),
     entry!("L-A6", "rain_fast", Lidar, "weather", Builder::Lidar(lidar::weather::fast::RAIN_FAST), "lightweight approximation (paper)", "Constant-time rain: intensity attenuation and sparsification of distant points"),

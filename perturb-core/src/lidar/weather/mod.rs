@@ -4,6 +4,7 @@
 //! |---|---|---|
 //! | L-A1, L-A5 | LISA Monte-Carlo scattering (Marshall-Gunn snow, Marshall-Palmer rain) | [`lisa`] |
 //! | L-A7, L-A8 | Hahner fog: attenuation and soft-target fog returns | [`fog`] |
+//! | L-A2, L-A3 | Hahner snowfall: per-beam snowflake occlusion (L-A2 also wets the ground) | [`snow`] |
 //! | L-A4, L-A6, L-A9 | lightweight constant-time approximations | [`fast`] |
 //!
 //! L-A10 strong sunlight is with the noise perturbations (`lidar::noise`).
@@ -16,6 +17,7 @@
 pub mod fast;
 pub mod fog;
 pub mod lisa;
+pub mod snow;
 
 /// Speed of light in m/s.
 pub const C_LIGHT: f64 = 299_792_458.0;
