@@ -49,12 +49,18 @@ struct TopicDescriptor {
 // SAFETY: the descriptors point at 'static constants only.
 unsafe impl Sync for TopicDescriptor {}
 
+/// `DDS_TOPIC_XTYPES_METADATA`.
+const XTYPES_METADATA: u32 = 1 << 6;
+
 macro_rules! descriptor {
     ($name:ident, $m:ident) => {
         static $name: TopicDescriptor = TopicDescriptor {
             m_size: ty::$m::SIZE,
             m_align: ty::$m::ALIGN,
-            m_flagset: ty::$m::FLAGSET,
+            // Without the XTypes metadata: Cyclone 0.10 crashes in its type lookup when it
+            // meets the type objects of newer Cyclone versions (11.x), and ROS 2 matches
+            // topics by type name anyway.
+            m_flagset: ty::$m::FLAGSET & !XTYPES_METADATA,
             m_nkeys: 0,
             m_typename: ty::$m::TYPENAME.as_ptr(),
             m_keys: std::ptr::null(),
@@ -62,12 +68,12 @@ macro_rules! descriptor {
             m_ops: ty::$m::OPS_WORDS.as_ptr(),
             m_meta: c"".as_ptr(),
             type_information: TypeMetaSer {
-                data: ty::$m::TYPE_INFORMATION.as_ptr(),
-                sz: ty::$m::TYPE_INFORMATION.len() as u32,
+                data: std::ptr::null(),
+                sz: 0,
             },
             type_mapping: TypeMetaSer {
-                data: ty::$m::TYPE_MAPPING.as_ptr(),
-                sz: ty::$m::TYPE_MAPPING.len() as u32,
+                data: std::ptr::null(),
+                sz: 0,
             },
             restrict_data_representation: 0,
         };
@@ -302,8 +308,18 @@ impl Api {
 /// The domain configuration used unless `CYCLONEDDS_URI` is set.
 const DOMAIN_XML: &str = "<CycloneDDS><Domain Id=\"any\"><General><MaxMessageSize>65500B</MaxMessageSize></General><Internal><SocketReceiveBufferSize min=\"default\" max=\"8MB\"/><SocketSendBufferSize min=\"default\" max=\"8MB\"/></Internal></Domain></CycloneDDS>";
 
+/// libddsc, loaded once per process and never unloaded: Cyclone keeps thread-specific data
+/// whose destructors run when any thread that called into it exits.
+static API: std::sync::OnceLock<Result<Api, String>> = std::sync::OnceLock::new();
+
+fn api() -> Result<&'static Api, DdsError> {
+    API.get_or_init(|| Api::load().map_err(|e| e.to_string()))
+        .as_ref()
+        .map_err(|e| unavailable(e.clone()))
+}
+
 struct Participant {
-    api: Api,
+    api: &'static Api,
     participant: Entity,
 }
 
@@ -323,7 +339,7 @@ pub struct CycloneBackend {
 impl CycloneBackend {
     /// Loads libddsc and creates a participant on `domain_id`.
     pub fn new(domain_id: u16) -> Result<Self, DdsError> {
-        let api = Api::load()?;
+        let api = api()?;
         if std::env::var_os("CYCLONEDDS_URI").is_none() {
             let xml = CString::new(DOMAIN_XML).expect("no NUL");
             // SAFETY: valid C string; a domain that exists already is reported, not fatal.
