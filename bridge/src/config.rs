@@ -303,12 +303,17 @@ impl Config {
             problem: e.to_string(),
         })?;
         let mut cfg = Self::parse(&text, &file)?;
-        // Relative paths in the file are relative to the file.
+        // Relative paths in the file (bag, record.out, report) are relative to the file.
         if let Some(dir) = path.parent() {
             if let Some(r) = &mut cfg.replay
                 && r.bag.is_relative()
             {
                 r.bag = dir.join(&r.bag);
+            }
+            if let Some(r) = &mut cfg.record
+                && r.out.is_relative()
+            {
+                r.out = dir.join(&r.out);
             }
             if let Some(r) = &mut cfg.bridge.report
                 && r.is_relative()

@@ -184,8 +184,10 @@ impl Adapter for Record {
             }
             drop(tx);
             drop(ready_tx);
-            for r in ready_rx.iter() {
-                r?;
+            for _ in 0..sides.len() {
+                ready_rx.recv().map_err(|_| {
+                    anyhow::anyhow!("a recorder thread ended before it was ready")
+                })??;
             }
             ctl.ready();
             // Write until every stream thread has finished and the queue is empty.

@@ -117,8 +117,16 @@ impl Replay {
         filter.start = Some(bag_start + (self.cfg.start_offset * 1e9) as u64);
         let mut seqs: BTreeMap<&str, u64> = BTreeMap::new();
         let mut pass = 0u32;
+        let mut next_pass_at: Option<Instant> = None;
         loop {
+            if let Some(at) = next_pass_at {
+                let now = Instant::now();
+                if at > now && !ctl.sleep(at - now) {
+                    break;
+                }
+            }
             let mut t0: Option<(Instant, u64)> = None;
+            let mut span = (u64::MAX, 0u64, 0u64); // first, last log time, messages
             let report = self.bag.for_each(&filter, |m| {
                 if ctl.stopped() {
                     return Ok(ControlFlow::Break(()));
@@ -127,6 +135,7 @@ impl Replay {
                     return Ok(ControlFlow::Continue(()));
                 };
                 rep.received += 1;
+                span = (span.0.min(m.log_time), span.1.max(m.log_time), span.2 + 1);
                 // Pace by the original timing.
                 if self.cfg.rate > 0.0 {
                     let (wall0, log0) = *t0.get_or_insert((Instant::now(), m.log_time));
@@ -223,6 +232,18 @@ impl Replay {
             pass += 1;
             if !self.cfg.looped || ctl.stopped() || rep.forwarded == 0 {
                 break;
+            }
+            // The next pass starts one mean message interval after the last message (at least
+            // 50 ms, so a bag of one instant does not flood the sinks), at the replay rate.
+            if self.cfg.rate > 0.0 {
+                let gap_ns = if span.2 > 1 && span.1 > span.0 {
+                    ((span.1 - span.0) / (span.2 - 1)).max(50_000_000)
+                } else {
+                    100_000_000
+                };
+                next_pass_at = Some(
+                    Instant::now() + Duration::from_secs_f64(gap_ns as f64 / 1e9 / self.cfg.rate),
+                );
             }
             tracing::info!("{name}: pass {pass} done, looping");
         }

@@ -167,12 +167,16 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
             handles.push((name, sink, h));
             Ok(())
         };
+    // Waits until `n` adapters are ready; an adapter that fails first drops its sender and
+    // stops the others, which ends the wait.
     let wait_ready = |rx: crossbeam::channel::Receiver<()>, n: usize| {
-        let deadline = Instant::now() + Duration::from_secs(60);
-        for _ in 0..n {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if rx.recv_timeout(left).is_err() {
-                break; // an adapter failed before it was ready (it stops the others)
+        let deadline = Instant::now() + Duration::from_secs(120);
+        let mut got = 0;
+        while got < n && Instant::now() < deadline && !stop.load(Ordering::SeqCst) {
+            match rx.recv_timeout(Duration::from_millis(50)) {
+                Ok(()) => got += 1,
+                Err(crossbeam::channel::RecvTimeoutError::Timeout) => {}
+                Err(crossbeam::channel::RecvTimeoutError::Disconnected) => break,
             }
         }
     };
@@ -181,12 +185,17 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
     for a in plan.sinks {
         spawn(a, tx.clone(), &mut handles)?;
     }
+    drop(tx);
     wait_ready(rx, n_sinks);
     let (tx, rx) = crossbeam::channel::unbounded();
     let n_sources = plan.sources.len();
     for a in plan.sources {
+        if stop.load(Ordering::SeqCst) {
+            break;
+        }
         spawn(a, tx.clone(), &mut handles)?;
     }
+    drop(tx);
     wait_ready(rx, n_sources);
     tracing::info!("bridge running on the {} bus", bus.name());
     let mut sources_done_at: Option<Instant> = None;

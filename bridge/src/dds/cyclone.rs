@@ -318,6 +318,11 @@ fn api() -> Result<&'static Api, DdsError> {
         .map_err(|e| unavailable(e.clone()))
 }
 
+/// Ok if the Cyclone DDS library can be loaded here (else why not).
+pub fn available() -> Result<(), DdsError> {
+    api().map(|_| ())
+}
+
 struct Participant {
     api: &'static Api,
     participant: Entity,
