@@ -458,10 +458,12 @@ impl Config {
                     format!("`{}` is written twice", e.topic),
                 ));
             }
-            if e.kind.is_none()
-                && !kinds.contains_key(&e.stream)
-                && self.replay.as_ref().is_none_or(|r| !r.topics.is_empty())
-            {
+            // A replayed stream's kind is known once the bag is open.
+            let replayed = self
+                .replay
+                .as_ref()
+                .is_some_and(|r| r.topics.is_empty() || r.topics.values().any(|s| s == &e.stream));
+            if e.kind.is_none() && !kinds.contains_key(&e.stream) && !replayed {
                 return Err(err(
                     format!("egress[{i}].kind"),
                     format!(

@@ -246,21 +246,22 @@ fn drain(
         n += 1;
         f(super::decode_body(ty, body, le));
     };
-    let cell: Callback<'_> = RefCell::new(&mut cb);
-    loop {
-        reader.drain_read_notifications();
-        match reader.try_take_one_with(CallbackDecoder(&cell)) {
-            Ok(Some(_)) => continue,
-            Ok(None) => break,
-            Err(e) => {
-                return Err(DdsError::Read {
-                    topic: spec.topic.clone(),
-                    reason: e.to_string(),
-                });
+    {
+        let cell: Callback<'_> = RefCell::new(&mut cb);
+        loop {
+            reader.drain_read_notifications();
+            match reader.try_take_one_with(CallbackDecoder(&cell)) {
+                Ok(Some(_)) => continue,
+                Ok(None) => break,
+                Err(e) => {
+                    return Err(DdsError::Read {
+                        topic: spec.topic.clone(),
+                        reason: e.to_string(),
+                    });
+                }
             }
         }
     }
-    drop(cell);
     Ok(n)
 }
 
