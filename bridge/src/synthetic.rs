@@ -2,17 +2,19 @@
 //! and VLP-32C scans with ring and time fields ([`perturb_core::synthetic::vlp32c_scan`]) at
 //! fixed rates into `<stream>/raw`.
 //!
-//! Rendering a 1920x1208 frame takes longer than a 33 ms frame period on a small machine, so by
-//! default the first `prerender` frames of the drive are rendered at start-up and cycled; the
-//! header stamp is the wall-clock time of publication, the sequence number keeps counting.
+//! Rendering a 1920x1208 frame takes longer than a 33 ms frame period on a small machine (about
+//! 0.1 s on two cores), so by default the first `prerender` frames of the drive are rendered at
+//! start-up and cycled; the header stamp is the wall-clock time of publication, the sequence
+//! number keeps counting.
 
 use crate::adapter::{Adapter, Control};
 use crate::bus::{Bus, Side};
 use crate::config::{SyntheticCamera, SyntheticLidar};
-use crate::frame::{FrameMeta, Hops, OwnedPayload, StreamKind, monotonic_ns, wall_ns};
+use crate::frame::{FrameMeta, Hops, OwnedPayload, Payload, StreamKind, monotonic_ns, wall_ns};
 use crate::stats::{AdapterReport, log_bad};
 use anyhow::Result;
 use perturb_core::cloud::Cloud;
+use perturb_core::formats::ros::{Header, ImageMsg, PointCloud2Msg};
 use perturb_core::image::Image;
 use perturb_core::synthetic::{street_image, vlp32c_scan};
 use std::time::{Duration, Instant};
@@ -131,43 +133,33 @@ impl Adapter for Synthetic {
             }
             let wall = wall_ns();
             let (sec, nanosec) = ((wall / 1_000_000_000) as i32, (wall % 1_000_000_000) as u32);
+            let header = Header {
+                stamp_sec: sec,
+                stamp_nanosec: nanosec,
+                frame_id: &frame_id,
+            };
+            // Cached frames are lent as they are (no copy); live ones are rendered now.
             let live;
             let payload = match &cache {
-                Frames::Images(v) if !v.is_empty() => {
-                    live = OwnedPayload::Image {
-                        sec,
-                        nanosec,
-                        frame_id: frame_id.clone(),
-                        image: v[(seq % v.len() as u64) as usize].clone(),
-                    };
-                    live.payload()
-                }
-                Frames::Clouds(v) if !v.is_empty() => {
-                    live = OwnedPayload::Cloud {
-                        sec,
-                        nanosec,
-                        frame_id: frame_id.clone(),
-                        cloud: v[(seq % v.len() as u64) as usize].clone(),
-                    };
-                    live.payload()
-                }
+                Frames::Images(v) if !v.is_empty() => Payload::Image(ImageMsg::from_view(
+                    header,
+                    &v[(seq % v.len() as u64) as usize].view(),
+                )),
+                Frames::Clouds(v) if !v.is_empty() => Payload::Cloud(PointCloud2Msg::from_view(
+                    header,
+                    &v[(seq % v.len() as u64) as usize].view(),
+                )),
                 _ => {
-                    live = match render(seq) {
-                        OwnedPayload::Image { image, .. } => OwnedPayload::Image {
-                            sec,
-                            nanosec,
-                            frame_id: frame_id.clone(),
-                            image,
-                        },
-                        OwnedPayload::Cloud { cloud, .. } => OwnedPayload::Cloud {
-                            sec,
-                            nanosec,
-                            frame_id: frame_id.clone(),
-                            cloud,
-                        },
-                        other => other,
-                    };
-                    live.payload()
+                    live = render(seq);
+                    match &live {
+                        OwnedPayload::Image { image, .. } => {
+                            Payload::Image(ImageMsg::from_view(header, &image.view()))
+                        }
+                        OwnedPayload::Cloud { cloud, .. } => {
+                            Payload::Cloud(PointCloud2Msg::from_view(header, &cloud.view()))
+                        }
+                        other => other.payload(),
+                    }
                 }
             };
             rep.received += 1;
