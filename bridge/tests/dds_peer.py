@@ -6,9 +6,11 @@ volatile) unless --reliable.
 
   dds_peer.py listen  --topic /cam --type image --count N [--timeout S]
       prints one JSON line per received sample: stamp, frame_id, geometry, sha256 of data
-  dds_peer.py publish --topic /cam --type image|cloud --count N [--width W --height H] [--points P]
+  dds_peer.py publish --topic /cam --type image|compressed_image|cloud --count N
+                      [--width W --height H] [--points P] [--lie]
       waits for a matched reader, publishes N samples (stamp sec=1000+i, nanosec=i*1000+7,
-      frame_id 'peer_frame', data bytes (i*31 + k*7) mod 251), prints one JSON line per sample
+      frame_id 'peer_frame', data bytes (i*31 + k*7) mod 251; compressed: a PNG of those
+      pixels), prints one JSON line per sample; --lie makes every odd sample malformed
 
 Exit status: 0 on success, 2 when the module is missing (the Rust tests turn that into a skip),
 1 on a timeout before `count` samples.
@@ -16,8 +18,10 @@ Exit status: 0 on success, 2 when the module is missing (the Rust tests turn tha
 import argparse
 import hashlib
 import json
+import struct
 import sys
 import time
+import zlib
 from dataclasses import dataclass
 
 try:
@@ -144,12 +148,29 @@ def listen(args):
     return 0 if got >= args.count else 1
 
 
+def png(width, height, rgb):
+    """A minimal rgb8 PNG (filter 0 on every row), built with zlib only."""
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    rows = b"".join(b"\x00" + rgb[y * width * 3:(y + 1) * width * 3] for y in range(height))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b"")
+
+
 def make(args, i):
     header = Header(stamp=Time(sec=1000 + i, nanosec=i * 1000 + 7), frame_id="peer_frame")
     if args.type == "image":
         step = args.width * 3
-        return Image(header=header, height=args.height, width=args.width, encoding="rgb8",
+        # --lie: every odd frame claims one row more than its data holds (a malformed message)
+        height = args.height + 1 if args.lie and i % 2 == 1 else args.height
+        return Image(header=header, height=height, width=args.width, encoding="rgb8",
                      is_bigendian=0, step=step, data=list(pattern(i, step * args.height)))
+    if args.type == "compressed_image":
+        rgb = pattern(i, args.width * args.height * 3)
+        data = png(args.width, args.height, rgb)
+        if args.lie and i % 2 == 1:
+            data = data[: len(data) // 2]  # a truncated PNG
+        return CompressedImage(header=header, format="png", data=list(data))
     if args.type == "cloud":
         fields = [PointField("x", 0, 7, 1), PointField("y", 4, 7, 1), PointField("z", 8, 7, 1),
                   PointField("intensity", 12, 7, 1)]
@@ -157,7 +178,7 @@ def make(args, i):
         return PointCloud2(header=header, height=1, width=args.points, fields=fields,
                            is_bigendian=False, point_step=16, row_step=16 * args.points,
                            data=list(pattern(i, 16 * args.points)), is_dense=True)
-    raise SystemExit("publish supports image and cloud")
+    raise SystemExit("unknown type")
 
 
 def publish(args):
@@ -174,7 +195,11 @@ def publish(args):
     for i in range(args.count):
         s = make(args, i)
         writer.write(s)
-        print(json.dumps(describe(s, args.type)), flush=True)
+        d = describe(s, args.type)
+        if args.type == "compressed_image":
+            d["pixels_sha256"] = hashlib.sha256(pattern(i, args.width * args.height * 3)).hexdigest()
+        d["lie"] = bool(args.lie and i % 2 == 1)
+        print(json.dumps(d), flush=True)
         time.sleep(1.0 / args.rate)
     time.sleep(args.settle)
     return 0
@@ -195,6 +220,7 @@ def main():
     ap.add_argument("--points", type=int, default=1000)
     ap.add_argument("--rate", type=float, default=10.0)
     ap.add_argument("--settle", type=float, default=0.5)
+    ap.add_argument("--lie", action="store_true", help="make every odd sample malformed")
     args = ap.parse_args()
     return listen(args) if args.mode == "listen" else publish(args)
 

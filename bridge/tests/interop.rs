@@ -212,16 +212,26 @@ stream = "camera"
 topic = "/sensing/lidar/points"
 type = "pointcloud2"
 stream = "lidar"
+[[ingress]]
+topic = "/sensing/camera/image_raw/compressed"
+type = "compressed_image"
+stream = "camera_png"
 [record]
 out = "rec"
-streams = ["camera", "lidar"]
+streams = ["camera", "lidar", "camera_png"]
 perturbed = false
 "#
         ),
     )
     .unwrap();
+    let report = dir.join("report.json");
     let mut bridge = Command::new(bridge_exe())
-        .args(["--config", cfg.to_str().unwrap()])
+        .args([
+            "--config",
+            cfg.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -249,14 +259,22 @@ perturbed = false
             .spawn()
             .unwrap()
     };
+    // Every odd image claims a row more than it carries, every odd PNG is truncated: the bridge
+    // must log, count and carry on.
     let pi = publish(
         "image",
         "/sensing/camera/image_raw",
-        &["--width", "40", "--height", "30"],
+        &["--width", "40", "--height", "30", "--lie"],
     );
     let pc = publish("cloud", "/sensing/lidar/points", &["--points", "500"]);
+    let pz = publish(
+        "compressed_image",
+        "/sensing/camera/image_raw/compressed",
+        &["--width", "24", "--height", "16", "--lie"],
+    );
     let sent_i = peer_lines(pi);
     let sent_c = peer_lines(pc);
+    let sent_z = peer_lines(pz);
     std::thread::sleep(Duration::from_millis(500));
     let status = interrupt(&mut bridge, Duration::from_secs(10));
     assert!(
@@ -265,17 +283,22 @@ perturbed = false
     );
     assert_eq!(sent_i.len(), 6);
     assert_eq!(sent_c.len(), 6);
-    // What the peer sent, by stamp.
+    assert_eq!(sent_z.len(), 6);
+    // The well-formed samples the peer sent, by stamp (PNGs: the sha256 of their pixels).
     let mut want: BTreeMap<(String, i64, u64), String> = BTreeMap::new();
-    for (topic, lines) in [("/camera/raw", &sent_i), ("/lidar/raw", &sent_c)] {
-        for l in lines.iter() {
+    for (topic, lines, key) in [
+        ("/camera/raw", &sent_i, "sha256"),
+        ("/lidar/raw", &sent_c, "sha256"),
+        ("/camera_png/raw", &sent_z, "pixels_sha256"),
+    ] {
+        for l in lines.iter().filter(|l| l["lie"] == false) {
             want.insert(
                 (
                     topic.to_string(),
                     l["sec"].as_i64().unwrap(),
                     l["nanosec"].as_u64().unwrap(),
                 ),
-                l["sha256"].as_str().unwrap().to_string(),
+                l[key].as_str().unwrap().to_string(),
             );
         }
     }
@@ -283,8 +306,16 @@ perturbed = false
     let mut got = BTreeMap::<String, usize>::new();
     bag.for_each(&Filter::default(), |m| {
         let (h, data) = match m.decode() {
-            Some(Ok(SensorMessage::Image(i))) => {
+            Some(Ok(SensorMessage::Image(i))) if m.topic == "/camera/raw" => {
                 assert_eq!((i.width, i.height, i.encoding), (40, 30, "rgb8"));
+                (i.header, i.data)
+            }
+            Some(Ok(SensorMessage::Image(i))) => {
+                assert_eq!(
+                    (i.width, i.height, i.encoding),
+                    (24, 16, "rgb8"),
+                    "decoded PNG"
+                );
                 (i.header, i.data)
             }
             Some(Ok(SensorMessage::Cloud(c))) => {
@@ -309,8 +340,26 @@ perturbed = false
     })
     .unwrap();
     // Best effort on a loaded machine may lose a sample; most must arrive.
-    assert!(got.get("/camera/raw").copied().unwrap_or(0) >= 4, "{got:?}");
+    assert!(got.get("/camera/raw").copied().unwrap_or(0) >= 2, "{got:?}");
+    assert!(
+        got.get("/camera_png/raw").copied().unwrap_or(0) >= 2,
+        "{got:?}"
+    );
     assert!(got.get("/lidar/raw").copied().unwrap_or(0) >= 4, "{got:?}");
+    // The malformed samples were counted, not forwarded.
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let bad = |name: &str| {
+        rep.as_array()
+            .unwrap()
+            .iter()
+            .find(|a| a["name"].as_str().unwrap().contains(name))
+            .map(|a| a["bad"].as_u64().unwrap())
+            .unwrap()
+    };
+    assert!(bad("/sensing/camera/image_raw ->") >= 1, "{rep}");
+    assert!(bad("/sensing/camera/image_raw/compressed") >= 1, "{rep}");
+    assert_eq!(bad("/sensing/lidar/points"), 0);
 }
 
 #[test]
