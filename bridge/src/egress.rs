@@ -4,7 +4,7 @@ use crate::adapter::{Adapter, Control, POLL};
 use crate::bus::{Bus, Side};
 use crate::dds::{DdsBackend, TopicSpec};
 use crate::frame::{StreamKind, monotonic_ns};
-use crate::stats::{AdapterReport, Latency, log_bad};
+use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
 use anyhow::Result;
 use std::sync::Arc;
 
@@ -46,6 +46,7 @@ impl Adapter for Egress {
             ..Default::default()
         };
         let mut total = Latency::default();
+        let mut hops = HopLatency::default();
         while !ctl.stopped() {
             let r = sub.recv(POLL, &mut |meta, payload| {
                 rep.received += 1;
@@ -57,9 +58,13 @@ impl Adapter for Egress {
                 match writer.write(payload) {
                     Ok(()) => {
                         rep.forwarded += 1;
-                        if meta.hops.source != 0 {
-                            total.add(monotonic_ns().saturating_sub(meta.hops.source));
+                        // The egress hop ends when the DDS write returns.
+                        let mut h = meta.hops;
+                        h.sink = monotonic_ns();
+                        if h.source != 0 {
+                            total.add(h.sink.saturating_sub(h.source));
                         }
+                        hops.add(&h);
                     }
                     Err(e) => {
                         rep.failed += 1;
@@ -73,6 +78,10 @@ impl Adapter for Egress {
             }
         }
         rep.latency = Some(total.summary());
+        rep.hops.insert(
+            format!("{}/{}", self.stream, self.side.as_str()),
+            hops.summary(),
+        );
         Ok(rep)
     }
 }

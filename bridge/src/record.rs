@@ -11,7 +11,7 @@ use crate::adapter::{Adapter, Control, POLL};
 use crate::bus::{Bus, Side};
 use crate::config::RecordSection;
 use crate::frame::{StreamKind, monotonic_ns, wall_ns};
-use crate::stats::{AdapterReport, Latency, log_bad};
+use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
 use anyhow::{Context, Result};
 use crossbeam::channel::{Sender, bounded};
 use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string};
@@ -34,6 +34,9 @@ pub fn record_topic(stream: &str, side: Side) -> String {
         .collect();
     format!("/{}/{}", clean.trim_matches('/'), side.as_str())
 }
+
+/// What one recorded stream side saw: key, frames, bad frames, latency, per-hop latency.
+type SideResult = (String, u64, u64, Latency, HopLatency);
 
 struct Msg {
     channel: u16,
@@ -108,7 +111,7 @@ impl Adapter for Record {
             ..Default::default()
         };
         let (ready_tx, ready_rx) = bounded::<Result<()>>(sides.len());
-        let results = std::thread::scope(|scope| -> Result<Vec<(u64, u64, Latency)>> {
+        let results = std::thread::scope(|scope| -> Result<Vec<SideResult>> {
             let mut handles = Vec::new();
             for (stream, kind, side, topic, ch) in sides.iter().cloned() {
                 let tx: Sender<Msg> = tx.clone();
@@ -117,7 +120,8 @@ impl Adapter for Record {
                 let done_streams = done_streams.clone();
                 let max = self.cfg.max_frames.filter(|_| side == counted);
                 let name = name.clone();
-                handles.push(scope.spawn(move || -> (u64, u64, Latency) {
+                handles.push(scope.spawn(move || -> SideResult {
+                    let key = format!("{stream}/{}", side.as_str());
                     let mut sub = match bus.subscriber(&stream, kind, side) {
                         Ok(s) => {
                             let _ = ready_tx.send(Ok(()));
@@ -125,10 +129,11 @@ impl Adapter for Record {
                         }
                         Err(e) => {
                             let _ = ready_tx.send(Err(e));
-                            return (0, 0, Latency::default());
+                            return (key, 0, 0, Latency::default(), HopLatency::default());
                         }
                     };
                     let (mut got, mut bad, mut lat) = (0u64, 0u64, Latency::default());
+                    let mut hops = HopLatency::default();
                     while !ctl.stopped() && max.is_none_or(|m| got < m) {
                         let r = sub.recv(POLL, &mut |meta, payload| {
                             if max.is_some_and(|m| got >= m) {
@@ -143,6 +148,7 @@ impl Adapter for Record {
                             if meta.hops.source != 0 {
                                 lat.add(monotonic_ns().saturating_sub(meta.hops.source));
                             }
+                            hops.add(&meta.hops);
                             let h = payload.header();
                             let event = (side == Side::Perturbed).then(|| {
                                 let ev = PerturbationEvent {
@@ -179,7 +185,7 @@ impl Adapter for Record {
                         tracing::info!("{name}: every stream reached max_frames; stopping");
                         ctl.stop_all();
                     }
-                    (got, bad, lat)
+                    (key, got, bad, lat, hops)
                 }));
             }
             drop(tx);
@@ -209,13 +215,18 @@ impl Adapter for Record {
             rep.forwarded = written;
             Ok(handles
                 .into_iter()
-                .map(|h| h.join().unwrap_or((0, 0, Latency::default())))
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        ("?".into(), 0, 0, Latency::default(), HopLatency::default())
+                    })
+                })
                 .collect())
         })?;
         let mut all = Latency::default();
-        for (got, bad, lat) in results {
+        for (key, got, bad, lat, hops) in results {
             rep.received += got;
             rep.bad += bad;
+            rep.hops.insert(key, hops.summary());
             for s in lat.samples() {
                 all.add(*s);
             }

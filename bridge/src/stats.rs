@@ -57,6 +57,69 @@ pub fn summarize(ns: &[u64]) -> Summary {
     }
 }
 
+/// Latency per hop of the frames a sink received: source -> daemon (iceoryx2 into the daemon),
+/// daemon (perturbation and its output), daemon -> sink (iceoryx2 out), and the total.
+#[derive(Clone, Debug, Default)]
+pub struct HopLatency {
+    to_daemon: Latency,
+    daemon: Latency,
+    to_sink: Latency,
+    total: Latency,
+}
+
+/// [`HopLatency`] summarised.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct HopSummary {
+    /// Source hop to daemon receive.
+    pub to_daemon: Summary,
+    /// Daemon receive to daemon send (the perturbation).
+    pub daemon: Summary,
+    /// Daemon send to sink receive.
+    pub to_sink: Summary,
+    /// Source hop to sink receive.
+    pub total: Summary,
+}
+
+impl HopLatency {
+    /// Adds a frame's hop timestamps (those that are 0 were not stamped and are skipped).
+    pub fn add(&mut self, h: &crate::frame::Hops) {
+        if h.source != 0 && h.sink >= h.source {
+            self.total.add(h.sink - h.source);
+        }
+        if h.source != 0 && h.daemon_in >= h.source && h.daemon_in != 0 {
+            self.to_daemon.add(h.daemon_in - h.source);
+        }
+        if h.daemon_in != 0 && h.daemon_out >= h.daemon_in {
+            self.daemon.add(h.daemon_out - h.daemon_in);
+        }
+        if h.daemon_out != 0 && h.sink >= h.daemon_out {
+            self.to_sink.add(h.sink - h.daemon_out);
+        }
+    }
+
+    /// Merges another series into this one.
+    pub fn merge(&mut self, o: &HopLatency) {
+        for (a, b) in [
+            (&mut self.to_daemon, &o.to_daemon),
+            (&mut self.daemon, &o.daemon),
+            (&mut self.to_sink, &o.to_sink),
+            (&mut self.total, &o.total),
+        ] {
+            a.samples.extend_from_slice(&b.samples);
+        }
+    }
+
+    /// The summary.
+    pub fn summary(&self) -> HopSummary {
+        HopSummary {
+            to_daemon: self.to_daemon.summary(),
+            daemon: self.daemon.summary(),
+            to_sink: self.to_sink.summary(),
+            total: self.total.summary(),
+        }
+    }
+}
+
 /// What one adapter did.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct AdapterReport {
@@ -78,6 +141,8 @@ pub struct AdapterReport {
     pub notes: Vec<String>,
     /// Latency from the source hop to this adapter (sinks), or of the adapter's own work.
     pub latency: Option<Summary>,
+    /// Per-hop latency of the frames a sink received, per `<stream>/<side>`.
+    pub hops: std::collections::BTreeMap<String, HopSummary>,
 }
 
 /// Logs a bad message, at most `limit` times in full per adapter, then every 100th.
