@@ -121,8 +121,52 @@ fn ground_color(x: f32, y: f32) -> [u8; 3] {
     base.map(|c| (c + grain).clamp(0, 255) as u8)
 }
 
+/// Where a box can appear on screen: the pixel rectangle (inclusive, with a margin) covering the
+/// projections of its corners, or the whole frame for a box the camera plane cuts; `None` for a
+/// box entirely behind the camera, which no ray can hit.
+fn screen_bounds(
+    b: &Aabb,
+    cam: [f32; 3],
+    f: f32,
+    (cx, cy): (f32, f32),
+    (w, h): (u32, u32),
+) -> Option<[i64; 4]> {
+    let full = [0, w as i64 - 1, 0, h as i64 - 1];
+    if b.max[0] <= cam[0] {
+        return None;
+    }
+    if b.min[0] <= cam[0] + 1e-3 {
+        return Some(full);
+    }
+    let (mut u0, mut u1, mut v0, mut v1) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
+    for corner in 0..8 {
+        let x = if corner & 1 == 0 { b.min[0] } else { b.max[0] } - cam[0];
+        let y = if corner & 2 == 0 { b.min[1] } else { b.max[1] } - cam[1];
+        let z = if corner & 4 == 0 { b.min[2] } else { b.max[2] } - cam[2];
+        // Pixel centre u + 0.5 looks along (1, -(u + 0.5 - cx) / f, -(v + 0.5 - cy) / f).
+        let u = cx - f * y / x - 0.5;
+        let v = cy - f * z / x - 0.5;
+        u0 = u0.min(u);
+        u1 = u1.max(u);
+        v0 = v0.min(v);
+        v1 = v1.max(v);
+    }
+    // Two pixels of margin absorb float rounding; the ray test below decides exactly.
+    let r = [
+        (u0.floor() as i64 - 2).max(0),
+        (u1.ceil() as i64 + 2).min(w as i64 - 1),
+        (v0.floor() as i64 - 2).max(0),
+        (v1.ceil() as i64 + 2).min(h as i64 - 1),
+    ];
+    (r[0] <= r[1] && r[2] <= r[3]).then_some(r)
+}
+
 /// A street-scene frame of `width` x `height` rgb8 at frame `n` (30 frames per second): camera
 /// 1.5 m above the road, looking along the road with a 90 degree horizontal field of view.
+///
+/// Each pixel casts a ray against the ground plane and the boxes whose screen rectangle holds the
+/// pixel (the rectangles only skip boxes a ray cannot hit, so the picture is that of testing every
+/// box).
 pub fn street_image(width: u32, height: u32, n: u64) -> Image {
     let mut img = Image::new(width, height, PixelFormat::Rgb8);
     if width == 0 || height == 0 {
@@ -133,17 +177,28 @@ pub fn street_image(width: u32, height: u32, n: u64) -> Image {
     let cam = [ex, 0.3, 1.5];
     let f = width as f32 / 2.0; // 90 degree horizontal field of view
     let (cx, cy) = (width as f32 / 2.0, height as f32 * 0.45);
+    let visible: Vec<(Aabb, [i64; 4])> = obs
+        .iter()
+        .filter_map(|b| screen_bounds(b, cam, f, (cx, cy), (width, height)).map(|r| (*b, r)))
+        .collect();
     let stride = img.stride;
     img.data
         .par_chunks_mut(stride)
         .enumerate()
         .for_each(|(v, row)| {
+            let row_boxes: Vec<&(Aabb, [i64; 4])> = visible
+                .iter()
+                .filter(|(_, r)| r[2] <= v as i64 && v as i64 <= r[3])
+                .collect();
             for u in 0..width as usize {
                 // Camera frame: x forward, y left, z up.
                 let d = [1.0, -(u as f32 + 0.5 - cx) / f, -(v as f32 + 0.5 - cy) / f];
                 let mut best = f32::INFINITY;
                 let mut color = [0u8; 3];
-                for b in &obs {
+                for (b, r) in &row_boxes {
+                    if (u as i64) < r[0] || (u as i64) > r[1] {
+                        continue;
+                    }
                     if let Some((t, axis)) = hit(b, cam, d)
                         && t < best
                     {

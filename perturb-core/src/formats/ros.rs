@@ -109,12 +109,16 @@ impl<'a> Reader<'a> {
                 ));
             }
         };
-        Ok(Reader {
-            body: &buf[4..],
+        Ok(Reader::body(&buf[4..], le, what))
+    }
+
+    fn body(body: &'a [u8], le: bool, what: &'static str) -> Self {
+        Reader {
+            body,
             pos: 0,
             le,
             what,
-        })
+        }
     }
 
     fn err(&self, field: &str, need: usize) -> Error {
@@ -222,7 +226,16 @@ impl Writer {
 impl<'a> ImageMsg<'a> {
     /// Decodes a CDR `sensor_msgs/Image`, borrowing the pixels.
     pub fn decode(buf: &'a [u8]) -> Result<Self> {
-        let mut r = Reader::new(buf, "sensor_msgs/Image CDR")?;
+        Self::read(Reader::new(buf, "sensor_msgs/Image CDR")?)
+    }
+
+    /// Decodes the CDR body of a `sensor_msgs/Image` (the bytes after the 4-byte encapsulation
+    /// header, as DDS implementations hand them out) in the given byte order.
+    pub fn decode_body(body: &'a [u8], little_endian: bool) -> Result<Self> {
+        Self::read(Reader::body(body, little_endian, "sensor_msgs/Image CDR"))
+    }
+
+    fn read(mut r: Reader<'a>) -> Result<Self> {
         Ok(ImageMsg {
             header: r.header()?,
             height: r.u32("height")?,
@@ -288,7 +301,19 @@ impl<'a> ImageMsg<'a> {
 impl<'a> CompressedImageMsg<'a> {
     /// Decodes a CDR `sensor_msgs/CompressedImage`.
     pub fn decode(buf: &'a [u8]) -> Result<Self> {
-        let mut r = Reader::new(buf, "sensor_msgs/CompressedImage CDR")?;
+        Self::read(Reader::new(buf, "sensor_msgs/CompressedImage CDR")?)
+    }
+
+    /// Decodes the CDR body (without the encapsulation header) in the given byte order.
+    pub fn decode_body(body: &'a [u8], little_endian: bool) -> Result<Self> {
+        Self::read(Reader::body(
+            body,
+            little_endian,
+            "sensor_msgs/CompressedImage CDR",
+        ))
+    }
+
+    fn read(mut r: Reader<'a>) -> Result<Self> {
         Ok(CompressedImageMsg {
             header: r.header()?,
             format: r.string("format")?,
@@ -309,7 +334,19 @@ impl<'a> CompressedImageMsg<'a> {
 impl<'a> PointCloud2Msg<'a> {
     /// Decodes a CDR `sensor_msgs/PointCloud2`, borrowing the points.
     pub fn decode(buf: &'a [u8]) -> Result<Self> {
-        let mut r = Reader::new(buf, "sensor_msgs/PointCloud2 CDR")?;
+        Self::read(Reader::new(buf, "sensor_msgs/PointCloud2 CDR")?)
+    }
+
+    /// Decodes the CDR body (without the encapsulation header) in the given byte order.
+    pub fn decode_body(body: &'a [u8], little_endian: bool) -> Result<Self> {
+        Self::read(Reader::body(
+            body,
+            little_endian,
+            "sensor_msgs/PointCloud2 CDR",
+        ))
+    }
+
+    fn read(mut r: Reader<'a>) -> Result<Self> {
         let header = r.header()?;
         let height = r.u32("height")?;
         let width = r.u32("width")?;

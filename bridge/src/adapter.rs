@@ -1,0 +1,69 @@
+//! What every adapter (a thread of the bridge) gets: the bus, the stop flag and a way to say
+//! that its subscriptions exist (sinks start before sources so no early frame is missed).
+
+use crate::bus::Bus;
+use crate::stats::AdapterReport;
+use anyhow::Result;
+use crossbeam::channel::Sender;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// The run-time context of an adapter.
+#[derive(Clone)]
+pub struct Control {
+    stop: Arc<AtomicBool>,
+    ready: Option<Sender<()>>,
+}
+
+impl Control {
+    /// A context with a stop flag and a readiness channel.
+    pub fn new(stop: Arc<AtomicBool>, ready: Option<Sender<()>>) -> Self {
+        Control { stop, ready }
+    }
+
+    /// True once the bridge is stopping.
+    pub fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// Asks every adapter to stop.
+    pub fn stop_all(&self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+
+    /// Says the adapter's ports exist.
+    pub fn ready(&mut self) {
+        if let Some(r) = self.ready.take() {
+            let _ = r.send(());
+        }
+    }
+
+    /// Sleeps `d`, waking early when stopped; false if stopped.
+    pub fn sleep(&self, d: Duration) -> bool {
+        let end = std::time::Instant::now() + d;
+        loop {
+            if self.stopped() {
+                return false;
+            }
+            let now = std::time::Instant::now();
+            if now >= end {
+                return true;
+            }
+            std::thread::sleep((end - now).min(Duration::from_millis(50)));
+        }
+    }
+}
+
+/// One adapter.
+pub trait Adapter: Send {
+    /// `ingress /topic -> stream`, ...
+    fn name(&self) -> String;
+    /// True for sinks (started first).
+    fn is_sink(&self) -> bool;
+    /// Creates its ports (inside its thread), calls `ctl.ready()`, runs until stopped or done.
+    fn run(self: Box<Self>, bus: &dyn Bus, ctl: Control) -> Result<AdapterReport>;
+}
+
+/// How long a blocking receive waits before checking the stop flag.
+pub const POLL: Duration = Duration::from_millis(100);

@@ -1,0 +1,278 @@
+//! Measures DDS latency between two processes on this machine for the bridge's backends:
+//! a writer (this process) and a reader (a child process of the same binary), each on its own
+//! participant, with sensor-data QoS unless `--reliable`.
+//!
+//! ```sh
+//! cargo run --release -p perturb-bridge --bin dds_latency -- --writer rustdds --reader cyclone --image 1920x1208
+//! cargo run --release -p perturb-bridge --bin dds_latency -- --writer cyclone --reader cyclone --cloud 120000
+//! ```
+//!
+//! The writer puts `CLOCK_MONOTONIC` at the moment it calls `write` into the header stamp; the
+//! reader subtracts it from the time its callback sees the message (decoded, data in hand). So a
+//! figure covers serialisation, the UDP loopback, reassembly and the reader's hand-over: the
+//! egress latency of the writer's backend towards the reader's, or the ingress latency of the
+//! reader's backend from the writer's. Lost samples (best effort) are counted.
+
+use perturb_bridge::dds::{self, BackendKind, Qos, Received, Reliability, RosType, TopicSpec};
+use perturb_bridge::frame::{OwnedPayload, monotonic_ns};
+use perturb_bridge::stats::summarize;
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+struct Args {
+    writer: BackendKind,
+    reader: BackendKind,
+    role_reader: bool,
+    image: Option<(u32, u32)>,
+    cloud: Option<usize>,
+    count: usize,
+    rate: f64,
+    reliable: bool,
+    domain: u16,
+}
+
+fn parse() -> Result<Args, String> {
+    let mut a = Args {
+        writer: BackendKind::Rustdds,
+        reader: BackendKind::Rustdds,
+        role_reader: false,
+        image: None,
+        cloud: None,
+        count: 100,
+        rate: 10.0,
+        reliable: false,
+        domain: 42,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(k) = it.next() {
+        let mut v = || it.next().ok_or(format!("{k} needs a value"));
+        match k.as_str() {
+            "--writer" => a.writer = v()?.parse()?,
+            "--reader" => a.reader = v()?.parse()?,
+            "--role-reader" => a.role_reader = true,
+            "--image" => {
+                let s = v()?;
+                let (w, h) = s
+                    .split_once('x')
+                    .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+                    .ok_or(format!("--image {s}: expected WxH"))?;
+                a.image = Some((w, h));
+            }
+            "--cloud" => a.cloud = Some(v()?.parse().map_err(|e| format!("--cloud: {e}"))?),
+            "--count" => a.count = v()?.parse().map_err(|e| format!("--count: {e}"))?,
+            "--rate" => a.rate = v()?.parse().map_err(|e| format!("--rate: {e}"))?,
+            "--domain" => a.domain = v()?.parse().map_err(|e| format!("--domain: {e}"))?,
+            "--reliable" => a.reliable = true,
+            "-h" | "--help" => {
+                println!(
+                    "dds_latency --writer rustdds|cyclone --reader rustdds|cyclone (--image WxH | --cloud POINTS) [--count N] [--rate HZ] [--reliable] [--domain D]"
+                );
+                std::process::exit(0);
+            }
+            o => return Err(format!("unknown argument {o}")),
+        }
+    }
+    if a.image.is_none() && a.cloud.is_none() {
+        a.image = Some((1920, 1208));
+    }
+    Ok(a)
+}
+
+fn spec(a: &Args) -> TopicSpec {
+    TopicSpec {
+        topic: "/perturb/latency".into(),
+        ros_type: if a.cloud.is_some() {
+            RosType::PointCloud2
+        } else {
+            RosType::Image
+        },
+        qos: Qos {
+            reliability: if a.reliable {
+                Reliability::Reliable
+            } else {
+                Reliability::BestEffort
+            },
+            ..Qos::SENSOR_DATA
+        },
+    }
+}
+
+fn reader(a: &Args) -> Result<(), String> {
+    let backend = dds::backend(a.reader, a.domain, "latency_reader").map_err(|e| e.to_string())?;
+    let mut r = backend.reader(&spec(a)).map_err(|e| e.to_string())?;
+    let out = std::io::stdout();
+    println!("ready");
+    out.lock().flush().ok();
+    let deadline = Instant::now() + Duration::from_secs(600);
+    while Instant::now() < deadline {
+        let mut lines = Vec::new();
+        r.take(Duration::from_millis(200), &mut |m| {
+            let now = monotonic_ns();
+            let h = match &m {
+                Ok(Received::Image(i)) => i.header,
+                Ok(Received::Cloud(c)) => c.header,
+                _ => return,
+            };
+            let sent = h.stamp_sec as u64 * 1_000_000_000 + h.stamp_nanosec as u64;
+            lines.push(format!("{} {}", h.frame_id, now.saturating_sub(sent)));
+        })
+        .map_err(|e| e.to_string())?;
+        let mut o = out.lock();
+        for l in lines {
+            let _ = writeln!(o, "{l}");
+        }
+        let _ = o.flush();
+    }
+    Ok(())
+}
+
+fn writer(a: &Args) -> Result<(), String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let mut child_args: Vec<String> = std::env::args().skip(1).collect();
+    child_args.push("--role-reader".into());
+    let mut child = Command::new(exe)
+        .args(&child_args)
+        .stdout(Stdio::piped())
+        .spawn()
+        .map_err(|e| e.to_string())?;
+    let stdout = child.stdout.take().ok_or("no child stdout")?;
+    let (tx, rx) = crossbeam::channel::unbounded::<String>();
+    std::thread::spawn(move || {
+        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = tx.send(l);
+        }
+    });
+    rx.recv_timeout(Duration::from_secs(30))
+        .map_err(|_| "reader did not start")?;
+    let backend = dds::backend(a.writer, a.domain, "latency_writer").map_err(|e| e.to_string())?;
+    let mut w = backend.writer(&spec(a)).map_err(|e| e.to_string())?;
+    let mut frame = match (a.image, a.cloud) {
+        (_, Some(n)) => {
+            let mut c = perturb_core::synthetic::vlp32c_scan(0);
+            // Repeat the scan's points up to n.
+            let step = c.layout.point_step as usize;
+            let src = c.data.clone();
+            c.data = (0..n * step).map(|i| src[i % src.len()]).collect();
+            OwnedPayload::Cloud {
+                sec: 0,
+                nanosec: 0,
+                frame_id: "warmup".into(),
+                cloud: perturb_core::cloud::Cloud::from_vec(
+                    c.layout.clone(),
+                    c.data,
+                    n as u32,
+                    1,
+                    n * step,
+                    true,
+                )
+                .map_err(|e| e.to_string())?,
+            }
+        }
+        (Some((wd, ht)), None) => OwnedPayload::Image {
+            sec: 0,
+            nanosec: 0,
+            frame_id: "warmup".into(),
+            image: perturb_core::synthetic::street_image(wd, ht, 0),
+        },
+        _ => unreachable!(),
+    };
+    let bytes = frame.payload().encode().len();
+    // Discovery: send warm-up frames until the reader sees one.
+    let t = Instant::now();
+    loop {
+        let now = monotonic_ns();
+        set_stamp(&mut frame, now, "warmup");
+        w.write(&frame.payload()).map_err(|e| e.to_string())?;
+        if let Ok(l) = rx.recv_timeout(Duration::from_millis(300))
+            && l.starts_with("warmup")
+        {
+            break;
+        }
+        if t.elapsed() > Duration::from_secs(30) {
+            let _ = child.kill();
+            return Err("the reader never matched".into());
+        }
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    while rx.try_recv().is_ok() {}
+    let period = Duration::from_secs_f64(1.0 / a.rate);
+    let start = Instant::now();
+    let mut write_ns = Vec::new();
+    for i in 0..a.count {
+        let due = start + period.mul_f64(i as f64);
+        if let Some(d) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(d);
+        }
+        let t0 = monotonic_ns();
+        set_stamp(&mut frame, t0, "m");
+        w.write(&frame.payload()).map_err(|e| e.to_string())?;
+        write_ns.push(monotonic_ns() - t0);
+    }
+    let mut lat = Vec::new();
+    let end = Instant::now() + Duration::from_secs(3);
+    while lat.len() < a.count {
+        match rx.recv_deadline(end) {
+            Ok(l) => {
+                if let Some(v) = l.strip_prefix("m ").and_then(|v| v.parse::<u64>().ok()) {
+                    lat.push(v);
+                }
+            }
+            Err(_) => break,
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    let s = summarize(&lat);
+    let wsum = summarize(&write_ns);
+    println!(
+        "{:<8} -> {:<8} {:>10} B  {:>4}/{:<4} received  latency p50 {:>7.2} ms  p99 {:>7.2} ms  max {:>7.2} ms  (write() call p50 {:.2} ms)",
+        format!("{:?}", a.writer).to_lowercase(),
+        format!("{:?}", a.reader).to_lowercase(),
+        bytes,
+        lat.len(),
+        a.count,
+        s.p50_ms,
+        s.p99_ms,
+        s.max_ms,
+        wsum.p50_ms
+    );
+    Ok(())
+}
+
+fn set_stamp(p: &mut OwnedPayload, ns: u64, id: &str) {
+    let (s, n) = ((ns / 1_000_000_000) as i32, (ns % 1_000_000_000) as u32);
+    match p {
+        OwnedPayload::Image {
+            sec,
+            nanosec,
+            frame_id,
+            ..
+        }
+        | OwnedPayload::Cloud {
+            sec,
+            nanosec,
+            frame_id,
+            ..
+        } => {
+            *sec = s;
+            *nanosec = n;
+            *frame_id = id.to_string();
+        }
+        OwnedPayload::Copied { .. } => {}
+    }
+}
+
+fn main() {
+    let r = parse().and_then(|a| {
+        if a.role_reader {
+            reader(&a)
+        } else {
+            writer(&a)
+        }
+    });
+    if let Err(e) = r {
+        eprintln!("error: {e}");
+        std::process::exit(1);
+    }
+}

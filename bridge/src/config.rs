@@ -1,0 +1,631 @@
+//! `perturb-bridge --config FILE.toml`: which adapters run and how topics map to streams.
+//!
+//! ```toml
+//! [bridge]
+//! name = "vehicle"            # ROS node name, log prefix
+//! bus = "iceoryx2"            # or "local": in-process passthrough, no daemon
+//!
+//! [dds]
+//! backend = "rustdds"         # or "cyclone"
+//! domain_id = 0
+//!
+//! [[ingress]]                 # ROS 2 topic -> <stream>/raw
+//! topic = "/sensing/camera/front/image_raw"
+//! type = "image"              # image | compressed_image | pointcloud2
+//! stream = "camera_front"
+//! qos = { reliability = "best_effort", depth = 5, durability = "volatile" }
+//!
+//! [[egress]]                  # <stream>/perturbed -> ROS 2 topic
+//! stream = "camera_front"
+//! topic = "/perturbed/camera/front/image_raw"
+//!
+//! [replay]                    # bag -> <stream>/raw, with the original timing
+//! bag = "drive.mcap"
+//! rate = 1.0                  # 0 = as fast as possible
+//! start_offset = 0.0          # seconds into the bag
+//! loop = false
+//! topics = { "/kitti/camera_color_left/image_raw" = "camera_front" }   # empty: every sensor topic
+//!
+//! [record]                    # streams -> rosbag2 MCAP + /perturb/events
+//! out = "recording"
+//! streams = ["camera_front"]
+//! raw = true
+//! perturbed = true
+//!
+//! [[synthetic.camera]]        # street scene -> <stream>/raw
+//! stream = "camera_front"
+//! width = 1920
+//! height = 1208
+//! rate_hz = 30.0
+//!
+//! [[synthetic.lidar]]         # VLP-32C -> <stream>/raw
+//! stream = "lidar_top"
+//! rate_hz = 10.0
+//!
+//! [streams]                   # kinds of streams fed by another process
+//! lidar_roof = "cloud"
+//! ```
+
+use crate::dds::{BackendKind, Qos, RosType};
+use crate::frame::StreamKind;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// Which bus carries frames between the adapters and the daemon.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BusKind {
+    /// iceoryx2 shared memory: sources publish `<stream>/raw`, sinks read `<stream>/perturbed`
+    /// written by `perturbd`.
+    #[default]
+    Iceoryx2,
+    /// In-process passthrough without a daemon: sinks get the sources' frames unperturbed (a bag
+    /// player, a recorder, a DDS relay).
+    Local,
+}
+
+/// `[bridge]`.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BridgeSection {
+    /// Node name.
+    pub name: String,
+    /// Bus.
+    pub bus: BusKind,
+    /// Where the end-of-run report (JSON) is written, if anywhere.
+    pub report: Option<PathBuf>,
+}
+
+impl Default for BridgeSection {
+    fn default() -> Self {
+        BridgeSection {
+            name: "perturb_bridge".into(),
+            bus: BusKind::default(),
+            report: None,
+        }
+    }
+}
+
+/// `[dds]`.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DdsSection {
+    /// Backend.
+    pub backend: BackendKind,
+    /// Domain.
+    pub domain_id: u16,
+}
+
+/// One `[[ingress]]` entry.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IngressEntry {
+    /// ROS 2 topic to read.
+    pub topic: String,
+    /// Its type.
+    #[serde(rename = "type")]
+    pub ros_type: RosType,
+    /// Stream to publish into (`<stream>/raw`).
+    pub stream: String,
+    /// QoS (sensor data by default).
+    #[serde(default)]
+    pub qos: Qos,
+}
+
+/// One `[[egress]]` entry.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EgressEntry {
+    /// Stream to read (`<stream>/perturbed`).
+    pub stream: String,
+    /// ROS 2 topic to write.
+    pub topic: String,
+    /// Stream kind; taken from the ingress, replay or synthetic entry of the stream when omitted.
+    #[serde(default)]
+    pub kind: Option<StreamKind>,
+    /// QoS (sensor data by default).
+    #[serde(default)]
+    pub qos: Qos,
+}
+
+/// `[replay]`.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReplaySection {
+    /// The bag (a `.mcap` file or a rosbag2 directory).
+    pub bag: PathBuf,
+    /// Speed factor (2 = twice as fast; 0 = as fast as possible).
+    #[serde(default = "one")]
+    pub rate: f64,
+    /// Seconds to skip from the start of the bag.
+    #[serde(default)]
+    pub start_offset: f64,
+    /// Start again at the end.
+    #[serde(default, rename = "loop")]
+    pub looped: bool,
+    /// Bag topic -> stream; empty: every Image, CompressedImage and PointCloud2 topic, each on a
+    /// stream named after the topic without its leading `/`.
+    #[serde(default)]
+    pub topics: BTreeMap<String, String>,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// `[record]`.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordSection {
+    /// Output bag directory (must not exist or be empty).
+    pub out: PathBuf,
+    /// Streams to record.
+    pub streams: Vec<String>,
+    /// Record `<stream>/raw` (topic `/<stream>/raw` unless `topics` says otherwise).
+    #[serde(default = "yes")]
+    pub raw: bool,
+    /// Record `<stream>/perturbed` (topic `/<stream>/perturbed`) and the event channel.
+    #[serde(default = "yes")]
+    pub perturbed: bool,
+    /// Chunk compression: zstd (default), lz4, none.
+    #[serde(default)]
+    pub compression: Option<String>,
+    /// Stop after this many perturbed (or, when only raw is recorded, raw) frames per stream.
+    #[serde(default)]
+    pub max_frames: Option<u64>,
+}
+
+/// `[[synthetic.camera]]`.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SyntheticCamera {
+    /// Stream.
+    pub stream: String,
+    /// Width.
+    #[serde(default = "default_width")]
+    pub width: u32,
+    /// Height.
+    #[serde(default = "default_height")]
+    pub height: u32,
+    /// Frames per second.
+    #[serde(default = "default_cam_rate")]
+    pub rate_hz: f64,
+    /// frame_id.
+    #[serde(default = "default_cam_frame")]
+    pub frame_id: String,
+    /// Frames rendered ahead and cycled (rendering a 1920x1208 scene takes longer than a frame
+    /// period on a small machine); 0 renders every frame live.
+    #[serde(default = "default_prerender")]
+    pub prerender: u32,
+    /// Stop after this many frames (default: run until stopped).
+    #[serde(default)]
+    pub count: Option<u64>,
+}
+
+fn default_width() -> u32 {
+    1920
+}
+fn default_height() -> u32 {
+    1208
+}
+fn default_cam_rate() -> f64 {
+    30.0
+}
+fn default_lidar_rate() -> f64 {
+    10.0
+}
+fn default_cam_frame() -> String {
+    "camera_front".into()
+}
+fn default_lidar_frame() -> String {
+    "velodyne".into()
+}
+fn default_prerender() -> u32 {
+    30
+}
+
+/// `[[synthetic.lidar]]`.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SyntheticLidar {
+    /// Stream.
+    pub stream: String,
+    /// Scans per second.
+    #[serde(default = "default_lidar_rate")]
+    pub rate_hz: f64,
+    /// frame_id.
+    #[serde(default = "default_lidar_frame")]
+    pub frame_id: String,
+    /// Scans rendered ahead and cycled; 0 renders every scan live.
+    #[serde(default = "default_prerender")]
+    pub prerender: u32,
+    /// Stop after this many scans.
+    #[serde(default)]
+    pub count: Option<u64>,
+}
+
+/// `[synthetic]`.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SyntheticSection {
+    /// Cameras.
+    pub camera: Vec<SyntheticCamera>,
+    /// LiDARs.
+    pub lidar: Vec<SyntheticLidar>,
+}
+
+/// The whole configuration.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// `[bridge]`.
+    pub bridge: BridgeSection,
+    /// `[dds]`.
+    pub dds: DdsSection,
+    /// `[[ingress]]`.
+    pub ingress: Vec<IngressEntry>,
+    /// `[[egress]]`.
+    pub egress: Vec<EgressEntry>,
+    /// `[replay]`.
+    pub replay: Option<ReplaySection>,
+    /// `[record]`.
+    pub record: Option<RecordSection>,
+    /// `[synthetic]`.
+    pub synthetic: SyntheticSection,
+    /// `[streams]`: what streams fed by another process carry (`camera_front = "image"`), for
+    /// bridges that only record or only egress.
+    pub streams: BTreeMap<String, StreamKind>,
+}
+
+/// A configuration error: the file, the key and the problem.
+#[derive(Debug, thiserror::Error)]
+#[error("{file}: {key}: {problem}")]
+pub struct ConfigError {
+    /// The file.
+    pub file: String,
+    /// The key (`egress[1].topic`).
+    pub key: String,
+    /// What is wrong.
+    pub problem: String,
+}
+
+impl Config {
+    /// Reads and validates a file.
+    pub fn load(path: &Path) -> Result<Config, ConfigError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+            file: file.clone(),
+            key: "(file)".into(),
+            problem: e.to_string(),
+        })?;
+        let mut cfg = Self::parse(&text, &file)?;
+        // Relative paths in the file (bag, record.out, report) are relative to the file.
+        if let Some(dir) = path.parent() {
+            if let Some(r) = &mut cfg.replay
+                && r.bag.is_relative()
+            {
+                r.bag = dir.join(&r.bag);
+            }
+            if let Some(r) = &mut cfg.record
+                && r.out.is_relative()
+            {
+                r.out = dir.join(&r.out);
+            }
+            if let Some(r) = &mut cfg.bridge.report
+                && r.is_relative()
+            {
+                *r = dir.join(&*r);
+            }
+        }
+        Ok(cfg)
+    }
+
+    /// Parses and validates TOML text; `file` names it in errors.
+    pub fn parse(text: &str, file: &str) -> Result<Config, ConfigError> {
+        let cfg: Config = toml::from_str(text).map_err(|e| {
+            let key = e
+                .span()
+                .map(|s| {
+                    let start = s.start.min(text.len());
+                    let line = text[..start].matches('\n').count() + 1;
+                    let what: String = text
+                        .get(start..s.end.min(text.len()))
+                        .unwrap_or("")
+                        .chars()
+                        .take(40)
+                        .collect();
+                    if what.trim().is_empty() || what.contains('\n') {
+                        format!("line {line}")
+                    } else {
+                        format!("line {line} `{}`", what.trim())
+                    }
+                })
+                .unwrap_or_else(|| "(toml)".into());
+            ConfigError {
+                file: file.to_string(),
+                key,
+                problem: e.message().to_string(),
+            }
+        })?;
+        cfg.validate(file)?;
+        Ok(cfg)
+    }
+
+    /// The kind of every stream a source feeds (ingress, replay with explicit topics, synthetic).
+    pub fn source_kinds(&self) -> BTreeMap<String, StreamKind> {
+        let mut m = self.streams.clone();
+        for i in &self.ingress {
+            let k = match i.ros_type {
+                RosType::PointCloud2 => StreamKind::Cloud,
+                _ => StreamKind::Image,
+            };
+            m.insert(i.stream.clone(), k);
+        }
+        for c in &self.synthetic.camera {
+            m.insert(c.stream.clone(), StreamKind::Image);
+        }
+        for l in &self.synthetic.lidar {
+            m.insert(l.stream.clone(), StreamKind::Cloud);
+        }
+        m
+    }
+
+    /// Checks everything that can be checked before starting; errors name the key.
+    pub fn validate(&self, file: &str) -> Result<(), ConfigError> {
+        let err = |key: String, problem: String| ConfigError {
+            file: file.to_string(),
+            key,
+            problem,
+        };
+        let check_stream = |key: String, s: &str| -> Result<(), ConfigError> {
+            if s.is_empty() || s.len() > 200 || s.starts_with('/') || s.contains("//") {
+                return Err(err(
+                    key,
+                    format!(
+                        "stream name `{s}` must be 1-200 characters, not start with `/` nor contain `//`"
+                    ),
+                ));
+            }
+            Ok(())
+        };
+        let check_topic = |key: String, t: &str| -> Result<(), ConfigError> {
+            let ok = t.starts_with('/')
+                && t.len() > 1
+                && !t.ends_with('/')
+                && !t.contains("//")
+                && t[1..]
+                    .split('/')
+                    .all(|p| !p.is_empty() && !p.starts_with(|c: char| c.is_ascii_digit()))
+                && t.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '/');
+            if !ok {
+                return Err(err(
+                    key,
+                    format!(
+                        "`{t}` is not a ROS 2 topic name (absolute, `/`-separated tokens of letters, digits and `_`, not starting with a digit)"
+                    ),
+                ));
+            }
+            Ok(())
+        };
+        let check_qos = |key: String, q: &Qos| -> Result<(), ConfigError> {
+            if q.depth == 0 || q.depth > 1000 {
+                return Err(err(key, format!("depth {} must be 1..=1000", q.depth)));
+            }
+            Ok(())
+        };
+        let mut ingress_topics = BTreeSet::new();
+        let mut sourced = BTreeSet::new();
+        for (i, e) in self.ingress.iter().enumerate() {
+            check_topic(format!("ingress[{i}].topic"), &e.topic)?;
+            check_stream(format!("ingress[{i}].stream"), &e.stream)?;
+            check_qos(format!("ingress[{i}].qos.depth"), &e.qos)?;
+            if !ingress_topics.insert(e.topic.clone()) {
+                return Err(err(
+                    format!("ingress[{i}].topic"),
+                    format!("`{}` is read twice", e.topic),
+                ));
+            }
+            if !sourced.insert(e.stream.clone()) {
+                return Err(err(
+                    format!("ingress[{i}].stream"),
+                    format!("stream `{}` already has a source", e.stream),
+                ));
+            }
+        }
+        let kinds = self.source_kinds();
+        let mut egress_topics = BTreeSet::new();
+        for (i, e) in self.egress.iter().enumerate() {
+            check_topic(format!("egress[{i}].topic"), &e.topic)?;
+            check_stream(format!("egress[{i}].stream"), &e.stream)?;
+            check_qos(format!("egress[{i}].qos.depth"), &e.qos)?;
+            if ingress_topics.contains(&e.topic) {
+                return Err(err(
+                    format!("egress[{i}].topic"),
+                    format!(
+                        "`{}` is also an ingress topic: the bridge would read its own output",
+                        e.topic
+                    ),
+                ));
+            }
+            if !egress_topics.insert(e.topic.clone()) {
+                return Err(err(
+                    format!("egress[{i}].topic"),
+                    format!("`{}` is written twice", e.topic),
+                ));
+            }
+            // A replayed stream's kind is known once the bag is open.
+            let replayed = self
+                .replay
+                .as_ref()
+                .is_some_and(|r| r.topics.is_empty() || r.topics.values().any(|s| s == &e.stream));
+            if e.kind.is_none() && !kinds.contains_key(&e.stream) && !replayed {
+                return Err(err(
+                    format!("egress[{i}].kind"),
+                    format!(
+                        "no source in this file feeds stream `{}`: say `kind = \"image\"` or `\"cloud\"`",
+                        e.stream
+                    ),
+                ));
+            }
+        }
+        if let Some(r) = &self.replay {
+            if !(r.rate >= 0.0 && r.rate.is_finite()) {
+                return Err(err(
+                    "replay.rate".into(),
+                    format!("{} must be >= 0 (0 = as fast as possible)", r.rate),
+                ));
+            }
+            if !(r.start_offset >= 0.0 && r.start_offset.is_finite()) {
+                return Err(err(
+                    "replay.start_offset".into(),
+                    format!("{} must be >= 0 seconds", r.start_offset),
+                ));
+            }
+            for (t, s) in &r.topics {
+                check_stream(format!("replay.topics.\"{t}\""), s)?;
+                if !sourced.insert(s.clone()) {
+                    return Err(err(
+                        format!("replay.topics.\"{t}\""),
+                        format!("stream `{s}` already has a source"),
+                    ));
+                }
+            }
+        }
+        for (i, c) in self.synthetic.camera.iter().enumerate() {
+            check_stream(format!("synthetic.camera[{i}].stream"), &c.stream)?;
+            if !sourced.insert(c.stream.clone()) {
+                return Err(err(
+                    format!("synthetic.camera[{i}].stream"),
+                    format!("stream `{}` already has a source", c.stream),
+                ));
+            }
+            if c.width == 0 || c.height == 0 || c.width > 16384 || c.height > 16384 {
+                return Err(err(
+                    format!("synthetic.camera[{i}].width"),
+                    format!("{}x{} is not a usable size (1..=16384)", c.width, c.height),
+                ));
+            }
+            if !(c.rate_hz > 0.0 && c.rate_hz <= 1000.0) {
+                return Err(err(
+                    format!("synthetic.camera[{i}].rate_hz"),
+                    format!("{} must be in (0, 1000]", c.rate_hz),
+                ));
+            }
+        }
+        for (i, l) in self.synthetic.lidar.iter().enumerate() {
+            check_stream(format!("synthetic.lidar[{i}].stream"), &l.stream)?;
+            if !sourced.insert(l.stream.clone()) {
+                return Err(err(
+                    format!("synthetic.lidar[{i}].stream"),
+                    format!("stream `{}` already has a source", l.stream),
+                ));
+            }
+            if !(l.rate_hz > 0.0 && l.rate_hz <= 100.0) {
+                return Err(err(
+                    format!("synthetic.lidar[{i}].rate_hz"),
+                    format!("{} must be in (0, 100]", l.rate_hz),
+                ));
+            }
+        }
+        if let Some(r) = &self.record {
+            if r.streams.is_empty() {
+                return Err(err("record.streams".into(), "is empty".into()));
+            }
+            for (i, s) in r.streams.iter().enumerate() {
+                check_stream(format!("record.streams[{i}]"), s)?;
+            }
+            if !r.raw && !r.perturbed {
+                return Err(err(
+                    "record.raw".into(),
+                    "both `raw` and `perturbed` are false: nothing to record".into(),
+                ));
+            }
+            if let Some(c) = &r.compression {
+                c.parse::<perturb_bag::Compression>()
+                    .map_err(|e| err("record.compression".into(), e))?;
+            }
+        }
+        let anything = !self.ingress.is_empty()
+            || !self.egress.is_empty()
+            || self.replay.is_some()
+            || self.record.is_some()
+            || !self.synthetic.camera.is_empty()
+            || !self.synthetic.lidar.is_empty();
+        if !anything {
+            return Err(err(
+                "(file)".into(),
+                "no adapter configured: add [[ingress]], [[egress]], [replay], [record] or [synthetic]".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(s: &str) -> Result<Config, ConfigError> {
+        Config::parse(s, "t.toml")
+    }
+
+    #[test]
+    fn full_example_parses_with_defaults() {
+        let c = parse(
+            r#"
+[dds]
+backend = "cyclone"
+[[ingress]]
+topic = "/sensing/camera/front/image_raw"
+type = "compressed_image"
+stream = "camera_front"
+[[egress]]
+stream = "camera_front"
+topic = "/perturbed/camera_front"
+qos = { reliability = "reliable", depth = 10 }
+[[synthetic.lidar]]
+stream = "lidar_top"
+[record]
+out = "rec"
+streams = ["camera_front", "lidar_top"]
+"#,
+        )
+        .unwrap();
+        assert_eq!(c.dds.backend, BackendKind::Cyclone);
+        assert_eq!(c.ingress[0].qos, Qos::SENSOR_DATA);
+        assert_eq!(c.egress[0].qos.depth, 10);
+        assert_eq!(c.egress[0].qos.durability, crate::dds::Durability::Volatile);
+        assert_eq!(c.synthetic.lidar[0].rate_hz, 10.0);
+        assert!(c.record.as_ref().unwrap().raw);
+    }
+
+    #[test]
+    fn errors_name_the_key_and_the_problem() {
+        let e = parse("[[ingress]]\ntopic = \"/a\"\ntype = \"image\"\nstream = \"s\"\n[[egress]]\nstream = \"s\"\ntopic = \"/a\"\n").unwrap_err();
+        assert_eq!(e.key, "egress[0].topic");
+        assert!(e.problem.contains("its own output"), "{e}");
+        let e = parse("[[egress]]\nstream = \"s\"\ntopic = \"no_slash\"\nkind = \"image\"\n")
+            .unwrap_err();
+        assert_eq!(e.key, "egress[0].topic");
+        let e = parse("[[egress]]\nstream = \"s\"\ntopic = \"/t\"\n").unwrap_err();
+        assert_eq!(e.key, "egress[0].kind");
+        let e = parse("[replay]\nbag = \"b\"\nrate = -1\n").unwrap_err();
+        assert_eq!(e.key, "replay.rate");
+        let e = parse("[replay]\nbag = \"b\"\nspeed = 2\n").unwrap_err();
+        assert!(e.problem.contains("unknown field `speed`"), "{e}");
+        assert_eq!(e.key, "line 3 `speed`");
+        let e =
+            parse("[[ingress]]\ntopic = \"/a\"\ntype = \"video\"\nstream = \"s\"\n").unwrap_err();
+        assert!(e.problem.contains("video"), "{e}");
+        let e = parse("").unwrap_err();
+        assert!(e.problem.contains("no adapter"), "{e}");
+        let e = parse("[record]\nout = \"x\"\nstreams = [\"a\"]\ncompression = \"gzip\"\n")
+            .unwrap_err();
+        assert_eq!(e.key, "record.compression");
+    }
+}

@@ -1,0 +1,302 @@
+//! ROS 2 over DDS: the backend interface and its implementations.
+//!
+//! A backend creates writers and readers of ROS 2 sensor topics. Topic and type names follow the
+//! ROS 2 DDS mapping (`/sensing/camera/image_raw` is the DDS topic `rt/sensing/camera/image_raw`
+//! of type `sensor_msgs::msg::dds_::Image_`), and messages are plain XCDR1, so any ROS 2 node
+//! (rmw_cyclonedds, rmw_fastrtps, rmw_connextdds) talks to them.
+//!
+//! Backends:
+//! - [`rustdds_backend`] (`rustdds`, the default): ros2-client 0.12 on RustDDS 0.15, pure Rust.
+//!   Slow for multi-megabyte messages (see the README's latency table).
+//! - [`cyclone`] (`cyclone`): Eclipse Cyclone DDS through its C library, loaded at run time
+//!   (`libddsc.so.0`, Debian package `libddsc0`/`cyclonedds-dev`), so the bridge builds without it.
+//!
+//! A process never reads the topics it writes: each direction gets its own DDS participant, and
+//! the configuration refuses an egress topic that is also an ingress topic.
+
+pub mod cyclone;
+mod cyclone_types;
+pub mod msgs;
+pub mod rustdds_backend;
+
+use crate::frame::Payload;
+use perturb_core::formats::ros::{CompressedImageMsg, ImageMsg, PointCloud2Msg};
+use std::time::Duration;
+
+/// A ROS 2 message type the bridge handles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RosType {
+    /// `sensor_msgs/msg/Image`.
+    Image,
+    /// `sensor_msgs/msg/CompressedImage` (jpeg or png; ingress only: decoded to an Image).
+    CompressedImage,
+    /// `sensor_msgs/msg/PointCloud2`.
+    #[serde(alias = "pointcloud2")]
+    PointCloud2,
+}
+
+impl RosType {
+    /// The ROS 2 type name (`sensor_msgs/msg/Image`).
+    pub fn ros_name(self) -> &'static str {
+        match self {
+            RosType::Image => "sensor_msgs/msg/Image",
+            RosType::CompressedImage => "sensor_msgs/msg/CompressedImage",
+            RosType::PointCloud2 => "sensor_msgs/msg/PointCloud2",
+        }
+    }
+
+    /// The DDS type name (`sensor_msgs::msg::dds_::Image_`).
+    pub fn dds_name(self) -> &'static str {
+        match self {
+            RosType::Image => "sensor_msgs::msg::dds_::Image_",
+            RosType::CompressedImage => "sensor_msgs::msg::dds_::CompressedImage_",
+            RosType::PointCloud2 => "sensor_msgs::msg::dds_::PointCloud2_",
+        }
+    }
+
+    /// The type's last name (`Image`).
+    pub fn short_name(self) -> &'static str {
+        match self {
+            RosType::Image => "Image",
+            RosType::CompressedImage => "CompressedImage",
+            RosType::PointCloud2 => "PointCloud2",
+        }
+    }
+
+    /// Parses a type as written in a config or a bag (`image`, `sensor_msgs/msg/Image`, ...).
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "image" | "Image" | "sensor_msgs/msg/Image" | "sensor_msgs/Image" => RosType::Image,
+            "compressed_image"
+            | "CompressedImage"
+            | "sensor_msgs/msg/CompressedImage"
+            | "sensor_msgs/CompressedImage" => RosType::CompressedImage,
+            "pointcloud2"
+            | "point_cloud2"
+            | "PointCloud2"
+            | "sensor_msgs/msg/PointCloud2"
+            | "sensor_msgs/PointCloud2" => RosType::PointCloud2,
+            _ => return None,
+        })
+    }
+}
+
+/// DDS reliability.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reliability {
+    /// Best effort: lost fragments lose the sample; never blocks the writer.
+    BestEffort,
+    /// Reliable: retransmits; a reliable reader does not match a best-effort writer.
+    Reliable,
+}
+
+/// DDS durability.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Durability {
+    /// Late joiners get nothing old.
+    Volatile,
+    /// Late joiners get the last `depth` samples.
+    TransientLocal,
+}
+
+/// The QoS of a topic.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Qos {
+    /// Reliability.
+    pub reliability: Reliability,
+    /// Durability.
+    pub durability: Durability,
+    /// History depth (KEEP_LAST).
+    pub depth: u32,
+}
+
+impl Qos {
+    /// ROS 2 `SensorDataQoS` (`rmw_qos_profile_sensor_data`): best effort, keep last 5, volatile.
+    pub const SENSOR_DATA: Qos = Qos {
+        reliability: Reliability::BestEffort,
+        durability: Durability::Volatile,
+        depth: 5,
+    };
+}
+
+impl Default for Qos {
+    fn default() -> Self {
+        Qos::SENSOR_DATA
+    }
+}
+
+/// A topic to read or write.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TopicSpec {
+    /// ROS 2 topic name (`/sensing/camera/image_raw`).
+    pub topic: String,
+    /// Message type.
+    pub ros_type: RosType,
+    /// QoS.
+    pub qos: Qos,
+}
+
+impl TopicSpec {
+    /// The DDS topic name: `rt` + the ROS name (`rt/sensing/camera/image_raw`).
+    pub fn dds_topic(&self) -> String {
+        let t = self.topic.trim_start_matches('/');
+        format!("rt/{t}")
+    }
+}
+
+/// Which backend to use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BackendKind {
+    /// ros2-client / RustDDS (pure Rust).
+    #[default]
+    Rustdds,
+    /// Cyclone DDS through libddsc.
+    Cyclone,
+}
+
+impl std::str::FromStr for BackendKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "rustdds" => Ok(BackendKind::Rustdds),
+            "cyclone" | "cyclonedds" => Ok(BackendKind::Cyclone),
+            o => Err(format!("unknown DDS backend `{o}` (rustdds, cyclone)")),
+        }
+    }
+}
+
+/// A DDS error, naming the topic.
+#[derive(Debug, thiserror::Error)]
+pub enum DdsError {
+    /// Creating a participant, topic, reader or writer failed.
+    #[error("DDS setup of `{topic}`: {reason}")]
+    Setup {
+        /// The topic (or `participant`).
+        topic: String,
+        /// What failed.
+        reason: String,
+    },
+    /// Writing a sample failed.
+    #[error("DDS write on `{topic}`: {reason}")]
+    Write {
+        /// The topic.
+        topic: String,
+        /// What failed.
+        reason: String,
+    },
+    /// Reading failed.
+    #[error("DDS read on `{topic}`: {reason}")]
+    Read {
+        /// The topic.
+        topic: String,
+        /// What failed.
+        reason: String,
+    },
+    /// The backend is not available on this machine.
+    #[error("DDS backend `{backend}` is not available: {reason}")]
+    Unavailable {
+        /// The backend.
+        backend: &'static str,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// A received message, borrowed from the backend's buffer while the callback runs.
+#[derive(Clone, Debug)]
+pub enum Received<'a> {
+    /// `sensor_msgs/Image`.
+    Image(ImageMsg<'a>),
+    /// `sensor_msgs/CompressedImage`.
+    Compressed(CompressedImageMsg<'a>),
+    /// `sensor_msgs/PointCloud2`.
+    Cloud(PointCloud2Msg<'a>),
+}
+
+/// Writes sensor messages on one topic.
+pub trait DdsWriter: Send {
+    /// Publishes one message (serialising it from the borrowed bytes).
+    fn write(&mut self, msg: &Payload<'_>) -> Result<(), DdsError>;
+    /// How many readers are matched, when the backend knows.
+    fn matched(&self) -> Option<usize>;
+}
+
+/// Reads sensor messages from one topic.
+pub trait DdsReader: Send {
+    /// Waits up to `timeout` for messages and passes every available one to `f` (a message that
+    /// does not decode is passed as an error; the reader carries on). Returns how many were
+    /// passed.
+    fn take(
+        &mut self,
+        timeout: Duration,
+        f: &mut dyn FnMut(Result<Received<'_>, perturb_core::Error>),
+    ) -> Result<usize, DdsError>;
+}
+
+/// A DDS implementation: one participant, many topics.
+pub trait DdsBackend: Send + Sync {
+    /// The backend's name.
+    fn name(&self) -> &'static str;
+    /// Creates a writer.
+    fn writer(&self, spec: &TopicSpec) -> Result<Box<dyn DdsWriter>, DdsError>;
+    /// Creates a reader.
+    fn reader(&self, spec: &TopicSpec) -> Result<Box<dyn DdsReader>, DdsError>;
+}
+
+/// Creates a backend with one participant on `domain_id`; `node` names the ROS node.
+pub fn backend(
+    kind: BackendKind,
+    domain_id: u16,
+    node: &str,
+) -> Result<Box<dyn DdsBackend>, DdsError> {
+    match kind {
+        BackendKind::Rustdds => Ok(Box::new(rustdds_backend::RustddsBackend::new(
+            domain_id, node,
+        )?)),
+        BackendKind::Cyclone => Ok(Box::new(cyclone::CycloneBackend::new(domain_id)?)),
+    }
+}
+
+/// Decodes a CDR body of `ty` in the given byte order.
+pub fn decode_body(
+    ty: RosType,
+    body: &[u8],
+    little_endian: bool,
+) -> Result<Received<'_>, perturb_core::Error> {
+    Ok(match ty {
+        RosType::Image => Received::Image(ImageMsg::decode_body(body, little_endian)?),
+        RosType::CompressedImage => {
+            Received::Compressed(CompressedImageMsg::decode_body(body, little_endian)?)
+        }
+        RosType::PointCloud2 => Received::Cloud(PointCloud2Msg::decode_body(body, little_endian)?),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_follow_the_ros2_dds_mapping() {
+        let s = TopicSpec {
+            topic: "/sensing/camera/image_raw".into(),
+            ros_type: RosType::Image,
+            qos: Qos::default(),
+        };
+        assert_eq!(s.dds_topic(), "rt/sensing/camera/image_raw");
+        assert_eq!(
+            RosType::parse("sensor_msgs/msg/PointCloud2"),
+            Some(RosType::PointCloud2)
+        );
+        assert_eq!(
+            RosType::PointCloud2.dds_name(),
+            "sensor_msgs::msg::dds_::PointCloud2_"
+        );
+        assert_eq!(Qos::default().depth, 5);
+    }
+}

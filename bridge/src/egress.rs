@@ -1,0 +1,87 @@
+//! DDS egress: `<stream>/perturbed` out to a ROS 2 topic, header stamp and frame_id bit-exact.
+
+use crate::adapter::{Adapter, Control, POLL};
+use crate::bus::{Bus, Side};
+use crate::dds::{DdsBackend, TopicSpec};
+use crate::frame::{StreamKind, monotonic_ns};
+use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
+use anyhow::Result;
+use std::sync::Arc;
+
+/// One egress mapping.
+pub struct Egress {
+    /// The stream.
+    pub stream: String,
+    /// What it carries.
+    pub kind: StreamKind,
+    /// The topic.
+    pub spec: TopicSpec,
+    /// Which side of the stream (perturbed, or raw in passthrough setups).
+    pub side: Side,
+    /// The DDS participant of the egress direction.
+    pub dds: Arc<dyn DdsBackend>,
+}
+
+impl Adapter for Egress {
+    fn name(&self) -> String {
+        format!(
+            "egress {}/{} -> {}",
+            self.stream,
+            self.side.as_str(),
+            self.spec.topic
+        )
+    }
+
+    fn is_sink(&self) -> bool {
+        true
+    }
+
+    fn run(self: Box<Self>, bus: &dyn Bus, mut ctl: Control) -> Result<AdapterReport> {
+        let name = self.name();
+        let mut writer = self.dds.writer(&self.spec)?;
+        let mut sub = bus.subscriber(&self.stream, self.kind, self.side)?;
+        ctl.ready();
+        let mut rep = AdapterReport {
+            name: name.clone(),
+            ..Default::default()
+        };
+        let mut total = Latency::default();
+        let mut hops = HopLatency::default();
+        while !ctl.stopped() {
+            let r = sub.recv(POLL, &mut |meta, payload| {
+                rep.received += 1;
+                if payload.kind() != self.kind {
+                    rep.bad += 1;
+                    log_bad(&name, rep.bad, &"frame of the wrong kind for this topic");
+                    return;
+                }
+                match writer.write(payload) {
+                    Ok(()) => {
+                        rep.forwarded += 1;
+                        // The egress hop ends when the DDS write returns.
+                        let mut h = meta.hops;
+                        h.sink = monotonic_ns();
+                        if h.source != 0 {
+                            total.add(h.sink.saturating_sub(h.source));
+                        }
+                        hops.add(&h);
+                    }
+                    Err(e) => {
+                        rep.failed += 1;
+                        log_bad(&name, rep.failed, &e);
+                    }
+                }
+            });
+            if let Err(e) = r {
+                rep.failed += 1;
+                log_bad(&name, rep.failed, &e);
+            }
+        }
+        rep.latency = Some(total.summary());
+        rep.hops.insert(
+            format!("{}/{}", self.stream, self.side.as_str()),
+            hops.summary(),
+        );
+        Ok(rep)
+    }
+}

@@ -1,0 +1,22 @@
+//! # perturb-bridge
+//!
+//! Connects the perturbation middleware to the outside world: ROS 2 topics in and out over DDS,
+//! rosbag2 MCAP replay (hardware-in-the-loop) and recording, and a synthetic camera and VLP-32C.
+//!
+//! Every adapter is a thread that talks to a [`bus::Bus`]: sources publish into
+//! `<stream>/raw`, sinks read `<stream>/perturbed`, and `perturbd` sits in between.
+#![warn(missing_docs)]
+
+pub mod adapter;
+pub mod bus;
+pub mod config;
+pub mod dds;
+pub mod egress;
+pub mod frame;
+pub mod ingress;
+pub mod iox;
+pub mod record;
+pub mod replay;
+pub mod run;
+pub mod stats;
+pub mod synthetic;

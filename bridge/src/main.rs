@@ -1,0 +1,302 @@
+//! `perturb-bridge`: ROS 2 (DDS) ingress and egress, MCAP replay and record, the synthetic sensor
+//! source, around the perturbation daemon `perturbd`.
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use perturb_bridge::config::{
+    BusKind, Config, EgressEntry, RecordSection, ReplaySection, SyntheticCamera, SyntheticLidar,
+};
+use perturb_bridge::dds::{BackendKind, Qos};
+use perturb_bridge::frame::StreamKind;
+use perturb_bridge::run;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Sensor bridges of the perturbation middleware.
+///
+/// With `--config FILE.toml` it runs the adapters the file describes (see config/bridge-*.toml).
+/// The subcommands are shortcuts for common set-ups.
+#[derive(Parser)]
+#[command(name = "perturb-bridge", version, about, long_about)]
+struct Cli {
+    /// The configuration file.
+    #[arg(long, short)]
+    config: Option<PathBuf>,
+    /// Only check the configuration, then exit.
+    #[arg(long)]
+    check: bool,
+    /// Seconds to wait, once every finite source is done, for the sinks to receive the last
+    /// frames through the daemon.
+    #[arg(long, default_value_t = 2.0)]
+    linger: f64,
+    /// Write the end-of-run report (JSON) here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Replay a rosbag2 MCAP bag into the raw streams with its original timing.
+    Replay {
+        /// The bag (`.mcap` file or rosbag2 directory).
+        bag: PathBuf,
+        /// Speed factor (0 = as fast as possible).
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+        /// Seconds to skip at the start.
+        #[arg(long, default_value_t = 0.0)]
+        start: f64,
+        /// Start again at the end.
+        #[arg(long = "loop")]
+        looped: bool,
+        /// TOPIC or TOPIC=STREAM (repeatable; default: every sensor topic, stream = topic without `/`).
+        #[arg(long = "topic")]
+        topics: Vec<String>,
+        /// Bus: iceoryx2 (through perturbd) or local (no daemon: a plain player).
+        #[arg(long, default_value = "iceoryx2")]
+        bus: String,
+        /// Also publish every replayed stream on ROS 2 as PREFIX + the bag topic.
+        #[arg(long)]
+        ros_prefix: Option<String>,
+        /// DDS backend for --ros-prefix.
+        #[arg(long, default_value = "rustdds")]
+        dds: String,
+        /// Also record the streams into this bag directory.
+        #[arg(long)]
+        record: Option<PathBuf>,
+    },
+    /// Record streams (raw and perturbed) into a rosbag2 MCAP bag with the perturbation events.
+    Record {
+        /// Output bag directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// STREAM=image or STREAM=cloud (repeatable).
+        #[arg(long = "stream", required = true)]
+        streams: Vec<String>,
+        /// Only the raw side.
+        #[arg(long, conflicts_with = "perturbed_only")]
+        raw_only: bool,
+        /// Only the perturbed side (and the events).
+        #[arg(long)]
+        perturbed_only: bool,
+        /// Stop after this many frames per stream.
+        #[arg(long)]
+        max_frames: Option<u64>,
+        /// Bus.
+        #[arg(long, default_value = "iceoryx2")]
+        bus: String,
+    },
+    /// Run the synthetic camera and VLP-32C.
+    Synthetic {
+        /// Camera stream (empty: no camera).
+        #[arg(long, default_value = "camera_front")]
+        camera: String,
+        /// Camera size WxH.
+        #[arg(long, default_value = "1920x1208")]
+        size: String,
+        /// Camera rate.
+        #[arg(long, default_value_t = 30.0)]
+        camera_hz: f64,
+        /// LiDAR stream (empty: no LiDAR).
+        #[arg(long, default_value = "lidar_top")]
+        lidar: String,
+        /// LiDAR rate.
+        #[arg(long, default_value_t = 10.0)]
+        lidar_hz: f64,
+        /// Frames per sensor (default: until stopped).
+        #[arg(long)]
+        count: Option<u64>,
+        /// Bus.
+        #[arg(long, default_value = "iceoryx2")]
+        bus: String,
+    },
+}
+
+fn bus_kind(s: &str) -> Result<BusKind> {
+    match s {
+        "iceoryx2" | "iox2" => Ok(BusKind::Iceoryx2),
+        "local" => Ok(BusKind::Local),
+        o => anyhow::bail!("--bus: unknown bus `{o}` (iceoryx2, local)"),
+    }
+}
+
+fn config_of(cli: &Cli) -> Result<Config> {
+    let mut cfg = match (&cli.config, &cli.command) {
+        (Some(path), None) => Config::load(path)?,
+        (None, Some(cmd)) => command_config(cmd)?,
+        (Some(_), Some(_)) => anyhow::bail!("give either --config or a subcommand, not both"),
+        (None, None) => anyhow::bail!(
+            "nothing to do: give --config FILE.toml or a subcommand (replay, record, synthetic); see --help"
+        ),
+    };
+    if cli.report.is_some() {
+        cfg.bridge.report = cli.report.clone();
+    }
+    Ok(cfg)
+}
+
+fn command_config(cmd: &Command) -> Result<Config> {
+    let mut cfg = Config::default();
+    match cmd {
+        Command::Replay {
+            bag,
+            rate,
+            start,
+            looped,
+            topics,
+            bus,
+            ros_prefix,
+            dds,
+            record,
+        } => {
+            cfg.bridge.bus = bus_kind(bus)?;
+            cfg.dds.backend = dds.parse::<BackendKind>().map_err(anyhow::Error::msg)?;
+            let mut map = std::collections::BTreeMap::new();
+            for t in topics {
+                let (topic, stream) = match t.split_once('=') {
+                    Some((a, b)) => (a.to_string(), b.to_string()),
+                    None => (t.clone(), perturb_bridge::replay::default_stream(t)),
+                };
+                map.insert(topic, stream);
+            }
+            cfg.replay = Some(ReplaySection {
+                bag: bag.clone(),
+                rate: *rate,
+                start_offset: *start,
+                looped: *looped,
+                topics: map,
+            });
+            let replay = perturb_bridge::replay::Replay::open(
+                cfg.replay.clone().context("replay section")?,
+            )?;
+            let routes: Vec<(String, String, StreamKind)> = replay
+                .routes
+                .iter()
+                .map(|(t, (s, k))| (t.clone(), s.clone(), *k))
+                .collect();
+            if let Some(prefix) = ros_prefix {
+                for (topic, stream, kind) in &routes {
+                    cfg.egress.push(EgressEntry {
+                        stream: stream.clone(),
+                        topic: format!("{}{}", prefix.trim_end_matches('/'), topic),
+                        kind: Some(*kind),
+                        qos: Qos::default(),
+                    });
+                }
+            }
+            if let Some(out) = record {
+                cfg.record = Some(RecordSection {
+                    out: out.clone(),
+                    streams: routes.iter().map(|r| r.1.clone()).collect(),
+                    raw: true,
+                    perturbed: cfg.bridge.bus == BusKind::Iceoryx2,
+                    compression: None,
+                    max_frames: None,
+                });
+            }
+        }
+        Command::Record {
+            out,
+            streams,
+            raw_only,
+            perturbed_only,
+            max_frames,
+            bus,
+        } => {
+            cfg.bridge.bus = bus_kind(bus)?;
+            let mut names = Vec::new();
+            for s in streams {
+                let (name, kind) = s
+                    .split_once('=')
+                    .with_context(|| format!("--stream `{s}`: say STREAM=image or STREAM=cloud"))?;
+                let kind = match kind {
+                    "image" => StreamKind::Image,
+                    "cloud" => StreamKind::Cloud,
+                    o => anyhow::bail!("--stream `{s}`: unknown kind `{o}` (image, cloud)"),
+                };
+                names.push(name.to_string());
+                cfg.streams.insert(name.to_string(), kind);
+            }
+            cfg.record = Some(RecordSection {
+                out: out.clone(),
+                streams: names,
+                raw: !perturbed_only,
+                perturbed: !raw_only,
+                compression: None,
+                max_frames: *max_frames,
+            });
+        }
+        Command::Synthetic {
+            camera,
+            size,
+            camera_hz,
+            lidar,
+            lidar_hz,
+            count,
+            bus,
+        } => {
+            cfg.bridge.bus = bus_kind(bus)?;
+            let (w, h) = size
+                .split_once('x')
+                .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+                .with_context(|| format!("--size `{size}`: expected WxH, e.g. 1920x1208"))?;
+            if !camera.is_empty() {
+                cfg.synthetic.camera.push(SyntheticCamera {
+                    stream: camera.clone(),
+                    width: w,
+                    height: h,
+                    rate_hz: *camera_hz,
+                    frame_id: "camera_front".into(),
+                    prerender: 30,
+                    count: *count,
+                });
+            }
+            if !lidar.is_empty() {
+                cfg.synthetic.lidar.push(SyntheticLidar {
+                    stream: lidar.clone(),
+                    rate_hz: *lidar_hz,
+                    frame_id: "velodyne".into(),
+                    prerender: 10,
+                    count: *count,
+                });
+            }
+        }
+    }
+    cfg.validate("(command line)")?;
+    Ok(cfg)
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,rustdds=warn,ros2_client=warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    if let Err(e) = real_main(cli) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn real_main(cli: Cli) -> Result<()> {
+    let cfg = config_of(&cli)?;
+    if cli.check {
+        println!("configuration OK");
+        return Ok(());
+    }
+    run::install_signal_handlers();
+    let plan = run::plan(&cfg)?;
+    let bus = run::make_bus(&cfg)?;
+    let reports = run::run(plan, bus, Duration::from_secs_f64(cli.linger.max(0.0)))?;
+    run::print_reports(&reports);
+    if let Some(path) = &cfg.bridge.report {
+        std::fs::write(path, serde_json::to_string_pretty(&reports)?)
+            .with_context(|| format!("cannot write the report {}", path.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,239 @@
+//! Recording: streams into a rosbag2 MCAP bag (the directory with `metadata.yaml` that `ros2 bag`
+//! and `rosbags` read), plus the `/perturb/events` channel saying, for every perturbed frame,
+//! which perturbation, severity and seed was active.
+//!
+//! Topics: `<stream>/raw` is recorded as `/<stream>/raw`, `<stream>/perturbed` as
+//! `/<stream>/perturbed` (characters that ROS topic names do not allow become `_`). A message's
+//! log time is when the recorder received it (rosbag2's convention); its publish time is when
+//! the frame entered the middleware (for a replayed bag: the original log time).
+
+use crate::adapter::{Adapter, Control, POLL};
+use crate::bus::{Bus, Side};
+use crate::config::RecordSection;
+use crate::frame::{StreamKind, monotonic_ns, wall_ns};
+use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
+use anyhow::{Context, Result};
+use crossbeam::channel::{Sender, bounded};
+use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string};
+use perturb_bag::{BagWriter, Compression, WriterOptions};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// The bag topic a stream side is recorded on.
+pub fn record_topic(stream: &str, side: Side) -> String {
+    let clean: String = stream
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '/' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("/{}/{}", clean.trim_matches('/'), side.as_str())
+}
+
+/// What one recorded stream side saw: key, frames, bad frames, latency, per-hop latency.
+type SideResult = (String, u64, u64, Latency, HopLatency);
+
+struct Msg {
+    channel: u16,
+    log_time: u64,
+    publish_time: u64,
+    cdr: Vec<u8>,
+    event: Option<Vec<u8>>,
+}
+
+/// The recorder.
+pub struct Record {
+    /// Settings.
+    pub cfg: RecordSection,
+    /// Stream kinds.
+    pub kinds: BTreeMap<String, StreamKind>,
+}
+
+impl Adapter for Record {
+    fn name(&self) -> String {
+        format!("record -> {}", self.cfg.out.display())
+    }
+
+    fn is_sink(&self) -> bool {
+        true
+    }
+
+    fn run(self: Box<Self>, bus: &dyn Bus, mut ctl: Control) -> Result<AdapterReport> {
+        let name = self.name();
+        let compression = match &self.cfg.compression {
+            Some(c) => c.parse::<Compression>().map_err(anyhow::Error::msg)?,
+            None => Compression::Zstd,
+        };
+        let mut writer = BagWriter::create(
+            &self.cfg.out,
+            &WriterOptions {
+                compression,
+                ..Default::default()
+            },
+        )?;
+        let mut sides = Vec::new();
+        for stream in &self.cfg.streams {
+            let kind = *self.kinds.get(stream).with_context(|| {
+                format!("record.streams: no source says what stream `{stream}` carries")
+            })?;
+            for (on, side) in [
+                (self.cfg.raw, Side::Raw),
+                (self.cfg.perturbed, Side::Perturbed),
+            ] {
+                if on {
+                    let topic = record_topic(stream, side);
+                    let ch = writer.add_topic(&topic, kind.ros_type())?;
+                    sides.push((stream.clone(), kind, side, topic, ch));
+                }
+            }
+        }
+        let events = if self.cfg.perturbed {
+            Some(writer.add_topic(EVENTS_TOPIC, EVENTS_TYPE)?)
+        } else {
+            None
+        };
+        // The side whose count `max_frames` limits.
+        let counted = if self.cfg.perturbed {
+            Side::Perturbed
+        } else {
+            Side::Raw
+        };
+        let (tx, rx) = bounded::<Msg>(64);
+        let done_streams = Arc::new(AtomicU64::new(0));
+        let n_counted = sides.iter().filter(|s| s.2 == counted).count() as u64;
+        let mut rep = AdapterReport {
+            name: name.clone(),
+            ..Default::default()
+        };
+        let (ready_tx, ready_rx) = bounded::<Result<()>>(sides.len());
+        let results = std::thread::scope(|scope| -> Result<Vec<SideResult>> {
+            let mut handles = Vec::new();
+            for (stream, kind, side, topic, ch) in sides.iter().cloned() {
+                let tx: Sender<Msg> = tx.clone();
+                let ctl = ctl.clone();
+                let ready_tx = ready_tx.clone();
+                let done_streams = done_streams.clone();
+                let max = self.cfg.max_frames.filter(|_| side == counted);
+                let name = name.clone();
+                handles.push(scope.spawn(move || -> SideResult {
+                    let key = format!("{stream}/{}", side.as_str());
+                    let mut sub = match bus.subscriber(&stream, kind, side) {
+                        Ok(s) => {
+                            let _ = ready_tx.send(Ok(()));
+                            s
+                        }
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(e));
+                            return (key, 0, 0, Latency::default(), HopLatency::default());
+                        }
+                    };
+                    let (mut got, mut bad, mut lat) = (0u64, 0u64, Latency::default());
+                    let mut hops = HopLatency::default();
+                    while !ctl.stopped() && max.is_none_or(|m| got < m) {
+                        let r = sub.recv(POLL, &mut |meta, payload| {
+                            if max.is_some_and(|m| got >= m) {
+                                return;
+                            }
+                            if payload.kind() != kind {
+                                bad += 1;
+                                log_bad(&name, bad, &format!("{stream}: frame of the wrong kind"));
+                                return;
+                            }
+                            got += 1;
+                            if meta.hops.source != 0 {
+                                lat.add(monotonic_ns().saturating_sub(meta.hops.source));
+                            }
+                            hops.add(&meta.hops);
+                            let h = payload.header();
+                            let event = (side == Side::Perturbed).then(|| {
+                                let ev = PerturbationEvent {
+                                    topic: topic.clone(),
+                                    stream: Some(stream.clone()),
+                                    seq: meta.seq,
+                                    stamp_sec: h.stamp_sec,
+                                    stamp_nanosec: h.stamp_nanosec,
+                                    frame_id: h.frame_id.to_string(),
+                                    id: meta.applied.as_ref().map(|a| a.id.clone()),
+                                    severity: meta.applied.as_ref().map(|a| a.severity),
+                                    seed: meta.applied.as_ref().map(|a| a.seed),
+                                };
+                                encode_string(
+                                    &serde_json::to_string(&ev).unwrap_or_else(|_| "{}".into()),
+                                )
+                            });
+                            let _ = tx.send(Msg {
+                                channel: ch,
+                                log_time: wall_ns(),
+                                publish_time: meta.log_time,
+                                cdr: payload.encode(),
+                                event,
+                            });
+                        });
+                        if let Err(e) = r {
+                            bad += 1;
+                            log_bad(&name, bad, &e);
+                        }
+                    }
+                    if max.is_some_and(|m| got >= m)
+                        && done_streams.fetch_add(1, Ordering::SeqCst) + 1 == n_counted
+                    {
+                        tracing::info!("{name}: every stream reached max_frames; stopping");
+                        ctl.stop_all();
+                    }
+                    (key, got, bad, lat, hops)
+                }));
+            }
+            drop(tx);
+            drop(ready_tx);
+            for _ in 0..sides.len() {
+                ready_rx.recv().map_err(|_| {
+                    anyhow::anyhow!("a recorder thread ended before it was ready")
+                })??;
+            }
+            ctl.ready();
+            // Write until every stream thread has finished and the queue is empty.
+            let mut written = 0u64;
+            for m in rx.iter() {
+                if let Err(e) = writer.write(m.channel, m.log_time, m.publish_time, &m.cdr) {
+                    rep.failed += 1;
+                    log_bad(&name, rep.failed, &e);
+                    continue;
+                }
+                written += 1;
+                if let (Some(ev), Some(ch)) = (m.event, events)
+                    && let Err(e) = writer.write(ch, m.log_time, m.publish_time, &ev)
+                {
+                    rep.failed += 1;
+                    log_bad(&name, rep.failed, &e);
+                }
+            }
+            rep.forwarded = written;
+            Ok(handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        ("?".into(), 0, 0, Latency::default(), HopLatency::default())
+                    })
+                })
+                .collect())
+        })?;
+        let mut all = Latency::default();
+        for (key, got, bad, lat, hops) in results {
+            rep.received += got;
+            rep.bad += bad;
+            rep.hops.insert(key, hops.summary());
+            for s in lat.samples() {
+                all.add(*s);
+            }
+        }
+        rep.latency = Some(all.summary());
+        let dir = writer.finish()?;
+        rep.notes.push(format!("bag written to {}", dir.display()));
+        Ok(rep)
+    }
+}

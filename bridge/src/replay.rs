@@ -1,0 +1,281 @@
+//! MCAP replay: a rosbag2 bag's sensor messages, in log-time order, paced by their original
+//! timing, into `<stream>/raw` (the hardware-in-the-loop source).
+//!
+//! Pacing: message `i` is published at `start + (log_time_i - log_time_0) / rate`; `rate = 0`
+//! publishes as fast as the sinks take them. Looping starts the bag again right after its last
+//! message (header stamps are the bag's, unchanged). A damaged bag is replayed up to the damage,
+//! which is reported; a ROS 1 profile bag is refused with perturb-bag's message.
+
+use crate::adapter::{Adapter, Control};
+use crate::bus::{Bus, BusPublisher, Side};
+use crate::config::ReplaySection;
+use crate::frame::{FrameMeta, Hops, OwnedPayload, Payload, StreamKind, monotonic_ns};
+use crate::stats::{AdapterReport, log_bad};
+use anyhow::{Context, Result};
+use perturb_bag::{Bag, Filter, SensorMessage};
+use std::collections::BTreeMap;
+use std::ops::ControlFlow;
+use std::time::{Duration, Instant};
+
+/// The replay engine.
+pub struct Replay {
+    /// Settings.
+    pub cfg: ReplaySection,
+    bag: Bag,
+    /// Bag topic -> (stream, kind).
+    pub routes: BTreeMap<String, (String, StreamKind)>,
+}
+
+/// The stream a topic goes to when the config does not say: the topic without its leading `/`.
+pub fn default_stream(topic: &str) -> String {
+    topic.trim_start_matches('/').to_string()
+}
+
+impl Replay {
+    /// Opens the bag and resolves the topic selection (errors name the bag and the topic).
+    pub fn open(cfg: ReplaySection) -> Result<Self> {
+        let bag = Bag::open(&cfg.bag)?;
+        let topics = bag.topics()?;
+        let kind_of = |type_name: &str| match type_name {
+            "sensor_msgs/msg/Image" | "sensor_msgs/msg/CompressedImage" => Some(StreamKind::Image),
+            "sensor_msgs/msg/PointCloud2" => Some(StreamKind::Cloud),
+            _ => None,
+        };
+        let mut routes = BTreeMap::new();
+        if cfg.topics.is_empty() {
+            for t in &topics {
+                if let Some(k) = kind_of(&t.type_name) {
+                    routes.insert(t.topic.clone(), (default_stream(&t.topic), k));
+                }
+            }
+            if routes.is_empty() {
+                anyhow::bail!(
+                    "{}: no Image, CompressedImage or PointCloud2 topic to replay (topics: {})",
+                    cfg.bag.display(),
+                    topics
+                        .iter()
+                        .map(|t| format!("{} [{}]", t.topic, t.type_name))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+        } else {
+            for (topic, stream) in &cfg.topics {
+                let t = topics.iter().find(|t| &t.topic == topic).with_context(|| {
+                    format!(
+                        "replay.topics: the bag {} has no topic `{topic}` (it has: {})",
+                        cfg.bag.display(),
+                        topics
+                            .iter()
+                            .map(|t| t.topic.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                })?;
+                let k = kind_of(&t.type_name).with_context(|| {
+                    format!(
+                        "replay.topics: `{topic}` is a {} (the bridge replays Image, CompressedImage and PointCloud2)",
+                        t.type_name
+                    )
+                })?;
+                routes.insert(topic.clone(), (stream.clone(), k));
+            }
+        }
+        Ok(Replay { cfg, bag, routes })
+    }
+
+    /// The log time of the first selected message, if any.
+    fn first_log_time(&self, filter: &Filter) -> Result<Option<u64>> {
+        let mut first = None;
+        self.bag.for_each(filter, |m| {
+            first = Some(m.log_time);
+            Ok(ControlFlow::Break(()))
+        })?;
+        Ok(first)
+    }
+
+    /// Replays, calling `emit(stream, meta, payload)` for every frame at its time. Returns the
+    /// report (damage, bad messages, skipped types).
+    pub fn run(
+        &self,
+        ctl: &Control,
+        name: &str,
+        emit: &mut dyn FnMut(&str, &FrameMeta, &Payload<'_>) -> Result<()>,
+    ) -> Result<AdapterReport> {
+        let mut rep = AdapterReport {
+            name: name.to_string(),
+            ..Default::default()
+        };
+        let mut filter = Filter {
+            topics: self.routes.keys().cloned().collect(),
+            ..Default::default()
+        };
+        let Some(bag_start) = self.first_log_time(&filter)? else {
+            rep.notes.push("no message to replay".into());
+            return Ok(rep);
+        };
+        filter.start = Some(bag_start + (self.cfg.start_offset * 1e9) as u64);
+        let mut seqs: BTreeMap<&str, u64> = BTreeMap::new();
+        let mut pass = 0u32;
+        let mut next_pass_at: Option<Instant> = None;
+        loop {
+            if let Some(at) = next_pass_at {
+                let now = Instant::now();
+                if at > now && !ctl.sleep(at - now) {
+                    break;
+                }
+            }
+            let mut t0: Option<(Instant, u64)> = None;
+            let mut span = (u64::MAX, 0u64, 0u64); // first, last log time, messages
+            let report = self.bag.for_each(&filter, |m| {
+                if ctl.stopped() {
+                    return Ok(ControlFlow::Break(()));
+                }
+                let Some((stream, _kind)) = self.routes.get(m.topic) else {
+                    return Ok(ControlFlow::Continue(()));
+                };
+                rep.received += 1;
+                span = (span.0.min(m.log_time), span.1.max(m.log_time), span.2 + 1);
+                // Pace by the original timing.
+                if self.cfg.rate > 0.0 {
+                    let (wall0, log0) = *t0.get_or_insert((Instant::now(), m.log_time));
+                    let due = wall0
+                        + Duration::from_secs_f64(
+                            m.log_time.saturating_sub(log0) as f64 / 1e9 / self.cfg.rate,
+                        );
+                    let now = Instant::now();
+                    if due > now && !ctl.sleep(due - now) {
+                        return Ok(ControlFlow::Break(()));
+                    }
+                }
+                let decoded = match m.decode() {
+                    Some(Ok(d)) => d,
+                    Some(Err(e)) => {
+                        rep.bad += 1;
+                        log_bad(name, rep.bad, &e);
+                        return Ok(ControlFlow::Continue(()));
+                    }
+                    None => {
+                        rep.skipped += 1;
+                        return Ok(ControlFlow::Continue(()));
+                    }
+                };
+                let owned;
+                let payload = match decoded {
+                    SensorMessage::Image(i) => Payload::Image(i),
+                    SensorMessage::Cloud(c) => Payload::Cloud(c),
+                    SensorMessage::Compressed(c) => {
+                        match perturb_core::formats::picture::decode(c.data) {
+                            Ok(image) => {
+                                owned = OwnedPayload::Image {
+                                    sec: c.header.stamp_sec,
+                                    nanosec: c.header.stamp_nanosec,
+                                    frame_id: c.header.frame_id.to_string(),
+                                    image,
+                                };
+                                owned.payload()
+                            }
+                            Err(e) => {
+                                rep.bad += 1;
+                                log_bad(
+                                    name,
+                                    rep.bad,
+                                    &format!("{} at {}: {e}", m.topic, m.log_time),
+                                );
+                                return Ok(ControlFlow::Continue(()));
+                            }
+                        }
+                    }
+                };
+                if let Err(e) = payload.validate() {
+                    rep.bad += 1;
+                    log_bad(
+                        name,
+                        rep.bad,
+                        &format!("{} at {}: {e}", m.topic, m.log_time),
+                    );
+                    return Ok(ControlFlow::Continue(()));
+                }
+                let seq = seqs.entry(stream.as_str()).or_insert(0);
+                let meta = FrameMeta {
+                    seq: *seq,
+                    log_time: m.log_time,
+                    applied: None,
+                    hops: Hops {
+                        source: monotonic_ns(),
+                        ..Default::default()
+                    },
+                };
+                match emit(stream, &meta, &payload) {
+                    Ok(()) => {
+                        *seq += 1;
+                        rep.forwarded += 1;
+                    }
+                    Err(e) => {
+                        rep.failed += 1;
+                        log_bad(name, rep.failed, &e);
+                    }
+                }
+                Ok(ControlFlow::Continue(()))
+            })?;
+            if let Some(d) = report.damage {
+                tracing::warn!("{name}: the bag is damaged: {d} (replayed what could be read)");
+                if !rep.damage.contains(&d) {
+                    rep.damage.push(d);
+                }
+            }
+            for n in report.notes {
+                if !rep.notes.contains(&n) {
+                    rep.notes.push(n);
+                }
+            }
+            pass += 1;
+            if !self.cfg.looped || ctl.stopped() || rep.forwarded == 0 {
+                break;
+            }
+            // The next pass starts one mean message interval after the last message (at least
+            // 50 ms, so a bag of one instant does not flood the sinks), at the replay rate.
+            if self.cfg.rate > 0.0 {
+                let gap_ns = if span.2 > 1 && span.1 > span.0 {
+                    ((span.1 - span.0) / (span.2 - 1)).max(50_000_000)
+                } else {
+                    100_000_000
+                };
+                next_pass_at = Some(
+                    Instant::now() + Duration::from_secs_f64(gap_ns as f64 / 1e9 / self.cfg.rate),
+                );
+            }
+            tracing::info!("{name}: pass {pass} done, looping");
+        }
+        Ok(rep)
+    }
+}
+
+/// The replay adapter: the engine publishing into the bus.
+pub struct ReplayAdapter(pub Replay);
+
+impl Adapter for ReplayAdapter {
+    fn name(&self) -> String {
+        format!("replay {}", self.0.cfg.bag.display())
+    }
+
+    fn is_sink(&self) -> bool {
+        false
+    }
+
+    fn run(self: Box<Self>, bus: &dyn Bus, mut ctl: Control) -> Result<AdapterReport> {
+        let name = self.name();
+        let mut pubs: BTreeMap<String, Box<dyn BusPublisher>> = BTreeMap::new();
+        for (stream, kind) in self.0.routes.values() {
+            pubs.insert(stream.clone(), bus.publisher(stream, *kind, Side::Raw)?);
+        }
+        ctl.ready();
+        let rep = self.0.run(&ctl, &name, &mut |stream, meta, payload| {
+            let p = pubs
+                .get_mut(stream)
+                .context("replay route without publisher")?;
+            p.publish(meta, payload)
+        })?;
+        Ok(rep)
+    }
+}

@@ -1,0 +1,271 @@
+//! Builds the adapters a configuration asks for and runs them, one thread each: sinks first
+//! (so no early frame is missed), then sources; stops on SIGINT/SIGTERM, when every finite source
+//! is done (after `linger`), or when the recorder has its `max_frames`.
+
+use crate::adapter::{Adapter, Control};
+use crate::bus::{Bus, Side};
+use crate::config::{BusKind, Config};
+use crate::dds::{self, DdsBackend, TopicSpec};
+use crate::egress::Egress;
+use crate::frame::StreamKind;
+use crate::ingress::Ingress;
+use crate::record::Record;
+use crate::replay::{Replay, ReplayAdapter};
+use crate::stats::AdapterReport;
+use crate::synthetic::Synthetic;
+use anyhow::{Context, Result};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// The adapters of a configuration, ready to run.
+pub struct Plan {
+    /// Sinks (egress, record).
+    pub sinks: Vec<Box<dyn Adapter>>,
+    /// Sources (ingress, replay, synthetic).
+    pub sources: Vec<Box<dyn Adapter>>,
+    /// True if a source runs until stopped (ingress, looped replay, endless synthetic).
+    pub endless: bool,
+}
+
+/// Builds the adapters (opens bags and DDS participants; errors name what failed).
+pub fn plan(cfg: &Config) -> Result<Plan> {
+    let mut kinds: BTreeMap<String, StreamKind> = cfg.source_kinds();
+    let mut sources: Vec<Box<dyn Adapter>> = Vec::new();
+    let mut sinks: Vec<Box<dyn Adapter>> = Vec::new();
+    let mut endless = false;
+    if let Some(r) = &cfg.replay {
+        let replay =
+            Replay::open(r.clone()).with_context(|| format!("replay.bag `{}`", r.bag.display()))?;
+        for (stream, kind) in replay.routes.values() {
+            kinds.insert(stream.clone(), *kind);
+        }
+        endless |= r.looped;
+        sources.push(Box::new(ReplayAdapter(replay)));
+    }
+    for e in &cfg.egress {
+        if let Some(k) = e.kind {
+            kinds.entry(e.stream.clone()).or_insert(k);
+        }
+    }
+    if !cfg.ingress.is_empty() {
+        let dds: Arc<dyn DdsBackend> = Arc::from(
+            dds::backend(
+                cfg.dds.backend,
+                cfg.dds.domain_id,
+                &format!("{}_ingress", cfg.bridge.name),
+            )
+            .context("dds (ingress participant)")?,
+        );
+        endless = true;
+        for i in &cfg.ingress {
+            sources.push(Box::new(Ingress {
+                spec: TopicSpec {
+                    topic: i.topic.clone(),
+                    ros_type: i.ros_type,
+                    qos: i.qos,
+                },
+                stream: i.stream.clone(),
+                dds: dds.clone(),
+            }));
+        }
+    }
+    for c in &cfg.synthetic.camera {
+        endless |= c.count.is_none();
+        sources.push(Box::new(Synthetic::camera(c.clone())));
+    }
+    for l in &cfg.synthetic.lidar {
+        endless |= l.count.is_none();
+        sources.push(Box::new(Synthetic::lidar(l.clone())));
+    }
+    if !cfg.egress.is_empty() {
+        let dds: Arc<dyn DdsBackend> = Arc::from(
+            dds::backend(
+                cfg.dds.backend,
+                cfg.dds.domain_id,
+                &format!("{}_egress", cfg.bridge.name),
+            )
+            .context("dds (egress participant)")?,
+        );
+        for (i, e) in cfg.egress.iter().enumerate() {
+            let kind = *kinds.get(&e.stream).with_context(|| {
+                format!(
+                    "egress[{i}].kind: nothing says what stream `{}` carries: add `kind = \"image\"` or `\"cloud\"`",
+                    e.stream
+                )
+            })?;
+            let ros_type = match kind {
+                StreamKind::Image => dds::RosType::Image,
+                StreamKind::Cloud => dds::RosType::PointCloud2,
+            };
+            sinks.push(Box::new(Egress {
+                stream: e.stream.clone(),
+                kind,
+                spec: TopicSpec {
+                    topic: e.topic.clone(),
+                    ros_type,
+                    qos: e.qos,
+                },
+                side: Side::Perturbed,
+                dds: dds.clone(),
+            }));
+        }
+    }
+    if let Some(r) = &cfg.record {
+        sinks.push(Box::new(Record {
+            cfg: r.clone(),
+            kinds: kinds.clone(),
+        }));
+    }
+    Ok(Plan {
+        sinks,
+        sources,
+        endless,
+    })
+}
+
+static SIGNALLED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    SIGNALLED.store(true, Ordering::SeqCst);
+}
+
+/// Makes SIGINT and SIGTERM set the stop flag instead of killing the process.
+pub fn install_signal_handlers() {
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+    }
+}
+
+/// Runs a plan on `bus` until stopped; returns every adapter's report.
+pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<AdapterReport>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut handles = Vec::new();
+    let spawn =
+        |a: Box<dyn Adapter>,
+         ready: crossbeam::channel::Sender<()>,
+         handles: &mut Vec<(String, bool, std::thread::JoinHandle<Result<AdapterReport>>)>|
+         -> Result<()> {
+            let name = a.name();
+            let sink = a.is_sink();
+            let ctl = Control::new(stop.clone(), Some(ready));
+            let bus = bus.clone();
+            let h = std::thread::Builder::new()
+                .name(name.chars().take(15).collect())
+                .spawn(move || {
+                    let stopper = ctl.clone();
+                    let r = a.run(bus.as_ref(), ctl);
+                    if let Err(e) = &r {
+                        tracing::error!("{e:#}");
+                        stopper.stop_all();
+                    }
+                    r
+                })?;
+            handles.push((name, sink, h));
+            Ok(())
+        };
+    // Waits until `n` adapters are ready; an adapter that fails first drops its sender and
+    // stops the others, which ends the wait.
+    let wait_ready = |rx: crossbeam::channel::Receiver<()>, n: usize| {
+        let deadline = Instant::now() + Duration::from_secs(120);
+        let mut got = 0;
+        while got < n && Instant::now() < deadline && !stop.load(Ordering::SeqCst) {
+            match rx.recv_timeout(Duration::from_millis(50)) {
+                Ok(()) => got += 1,
+                Err(crossbeam::channel::RecvTimeoutError::Timeout) => {}
+                Err(crossbeam::channel::RecvTimeoutError::Disconnected) => break,
+            }
+        }
+    };
+    let (tx, rx) = crossbeam::channel::unbounded();
+    let n_sinks = plan.sinks.len();
+    for a in plan.sinks {
+        spawn(a, tx.clone(), &mut handles)?;
+    }
+    drop(tx);
+    wait_ready(rx, n_sinks);
+    let (tx, rx) = crossbeam::channel::unbounded();
+    let n_sources = plan.sources.len();
+    for a in plan.sources {
+        if stop.load(Ordering::SeqCst) {
+            break;
+        }
+        spawn(a, tx.clone(), &mut handles)?;
+    }
+    drop(tx);
+    wait_ready(rx, n_sources);
+    tracing::info!("bridge running on the {} bus", bus.name());
+    let mut sources_done_at: Option<Instant> = None;
+    loop {
+        if SIGNALLED.load(Ordering::SeqCst) {
+            tracing::info!("signal received: stopping");
+            stop.store(true, Ordering::SeqCst);
+        }
+        if stop.load(Ordering::SeqCst) {
+            break;
+        }
+        let sources_left = handles.iter().any(|(_, sink, h)| !sink && !h.is_finished());
+        let sinks_left = handles.iter().any(|(_, sink, h)| *sink && !h.is_finished());
+        if !plan.endless && !sources_left {
+            let t = *sources_done_at.get_or_insert_with(Instant::now);
+            if !sinks_left || t.elapsed() >= linger {
+                stop.store(true, Ordering::SeqCst);
+                break;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut reports = Vec::new();
+    let mut first_err = None;
+    for (name, _, h) in handles {
+        match h.join() {
+            Ok(Ok(r)) => reports.push(r),
+            Ok(Err(e)) => {
+                first_err.get_or_insert(e.context(name));
+            }
+            Err(_) => {
+                first_err.get_or_insert(anyhow::anyhow!("{name}: the adapter thread panicked"));
+            }
+        }
+    }
+    match first_err {
+        Some(e) => Err(e),
+        None => Ok(reports),
+    }
+}
+
+/// The bus of a configuration.
+pub fn make_bus(cfg: &Config) -> Result<Arc<dyn Bus>> {
+    match cfg.bridge.bus {
+        BusKind::Local => Ok(Arc::new(crate::bus::SharedLocalBus::default())),
+        BusKind::Iceoryx2 => crate::iox::bus(&cfg.bridge.name),
+    }
+}
+
+/// Prints the reports as a table.
+pub fn print_reports(reports: &[AdapterReport]) {
+    println!(
+        "{:<60} {:>8} {:>8} {:>5} {:>7} {:>6} {:>9} {:>9}",
+        "adapter", "in", "out", "bad", "skipped", "failed", "p50 ms", "p99 ms"
+    );
+    for r in reports {
+        let (p50, p99) = r
+            .latency
+            .filter(|l| l.n > 0)
+            .map(|l| (format!("{:.2}", l.p50_ms), format!("{:.2}", l.p99_ms)))
+            .unwrap_or_else(|| ("-".into(), "-".into()));
+        println!(
+            "{:<60} {:>8} {:>8} {:>5} {:>7} {:>6} {:>9} {:>9}",
+            r.name, r.received, r.forwarded, r.bad, r.skipped, r.failed, p50, p99
+        );
+        for d in &r.damage {
+            println!("    damage: {d}");
+        }
+        for n in &r.notes {
+            println!("    note: {n}");
+        }
+    }
+}

@@ -1,0 +1,294 @@
+//! MCAP replay and record through the bridge binary, checked by independent readers: a real
+//! rosbag2 bag from ../shared/data replayed and recorded, the recording read back by the Python
+//! `rosbags` package; damaged and ROS 1 bags; the replay engine's topic selection, start offset
+//! and looping.
+
+mod common;
+
+use common::*;
+use perturb_bag::{Bag, BagWriter, Filter, SensorMessage, WriterOptions};
+use perturb_bridge::adapter::Control;
+use perturb_bridge::config::ReplaySection;
+use perturb_bridge::frame::Payload;
+use perturb_bridge::replay::Replay;
+use perturb_core::formats::ros::{Header, ImageMsg};
+use perturb_core::synthetic::street_image;
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::ops::ControlFlow;
+use std::path::Path;
+use std::process::Command;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+fn sha(b: &[u8]) -> String {
+    hex::encode(Sha256::digest(b))
+}
+
+fn rosbags_read(bag: &Path) -> Option<Vec<serde_json::Value>> {
+    if !need(
+        has_python_module("rosbags"),
+        "the Python module rosbags (pip install rosbags)",
+    ) {
+        return None;
+    }
+    let out = Command::new(python())
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/read_bag.py"))
+        .arg(bag)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "rosbags could not read {}: {}",
+        bag.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Some(
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect(),
+    )
+}
+
+#[test]
+fn kitti_bag_replayed_and_recorded_reads_back_in_rosbags() {
+    let Some(src) = shared_data("ros2_mcap_kitti_000001") else {
+        return;
+    };
+    let dir = scratch("kitti-replay");
+    let out = dir.join("rec");
+    let run = Command::new(bridge_exe())
+        .args(["--linger", "1", "replay"])
+        .arg(&src)
+        .args(["--bus", "local", "--rate", "0", "--record"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    // What the source bag holds, decoded by perturb-bag.
+    let mut want: BTreeMap<String, (i32, u32, String, Option<String>)> = BTreeMap::new();
+    Bag::open(&src)
+        .unwrap()
+        .for_each(&Filter::default(), |m| {
+            let entry = match m.decode() {
+                Some(Ok(SensorMessage::Image(i))) => (
+                    i.header.stamp_sec,
+                    i.header.stamp_nanosec,
+                    i.header.frame_id.to_string(),
+                    Some(sha(i.data)),
+                ),
+                Some(Ok(SensorMessage::Cloud(c))) => (
+                    c.header.stamp_sec,
+                    c.header.stamp_nanosec,
+                    c.header.frame_id.to_string(),
+                    Some(sha(c.data)),
+                ),
+                Some(Ok(SensorMessage::Compressed(c))) => (
+                    c.header.stamp_sec,
+                    c.header.stamp_nanosec,
+                    c.header.frame_id.to_string(),
+                    None,
+                ),
+                _ => return Ok(ControlFlow::Continue(())),
+            };
+            want.insert(format!("/{}/raw", m.topic.trim_start_matches('/')), entry);
+            Ok(ControlFlow::Continue(()))
+        })
+        .unwrap();
+    assert_eq!(want.len(), 3, "image, compressed image and cloud topics");
+    let Some(lines) = rosbags_read(&out) else {
+        return;
+    };
+    let msgs: Vec<_> = lines.iter().filter(|l| l.get("topic").is_some()).collect();
+    assert_eq!(msgs.len(), 3, "every frame recorded once: {msgs:?}");
+    for m in msgs {
+        let topic = m["topic"].as_str().unwrap();
+        let (sec, nanosec, frame_id, data) = want
+            .get(topic)
+            .unwrap_or_else(|| panic!("unexpected topic {topic}"));
+        assert_eq!(m["sec"].as_i64().unwrap(), *sec as i64, "{topic}");
+        assert_eq!(m["nanosec"].as_u64().unwrap(), *nanosec as u64, "{topic}");
+        assert_eq!(m["frame_id"].as_str().unwrap(), frame_id, "{topic}");
+        if let Some(d) = data {
+            assert_eq!(m["sha256"].as_str().unwrap(), d, "{topic}: data bit-exact");
+        } else {
+            // The compressed PNG was decoded to a raw Image.
+            assert_eq!(m["type"], "sensor_msgs/msg/Image");
+            assert!(m["width"].as_u64().unwrap() > 1000);
+        }
+    }
+    // The CameraInfo topic is not a sensor frame: counted as skipped.
+    assert!(stdout.contains("replay"), "{stdout}");
+}
+
+/// A bag of `n` small images 100 ms apart with stamps (1000 + i, i).
+fn image_bag(dir: &Path, n: u32) -> Vec<u8> {
+    let opts = WriterOptions {
+        compression: perturb_bag::Compression::None,
+        chunk_size: 4096,
+    };
+    let mut w = BagWriter::create(dir, &opts).unwrap();
+    let ch = w.add_topic("/cam", "sensor_msgs/msg/Image").unwrap();
+    let other = w.add_topic("/other", "sensor_msgs/msg/Image").unwrap();
+    let img = street_image(16, 8, 0);
+    for i in 0..n {
+        let m = ImageMsg::from_view(
+            Header {
+                stamp_sec: 1000 + i as i32,
+                stamp_nanosec: i,
+                frame_id: "cam",
+            },
+            &img.view(),
+        );
+        let t = 1_000_000_000 + i as u64 * 100_000_000;
+        w.write(ch, t, t, &m.encode()).unwrap();
+        w.write(other, t + 1, t + 1, &m.encode()).unwrap();
+    }
+    w.finish().unwrap();
+    std::fs::read(dir.join(format!(
+        "{}_0.mcap",
+        dir.file_name().unwrap().to_str().unwrap()
+    )))
+    .unwrap()
+}
+
+#[test]
+fn replay_engine_selects_topics_skips_the_offset_and_loops() {
+    let dir = scratch("engine");
+    image_bag(&dir.join("b"), 5);
+    let replay = Replay::open(ReplaySection {
+        bag: dir.join("b"),
+        rate: 0.0,
+        start_offset: 0.25,
+        looped: true,
+        topics: [("/cam".to_string(), "camera".to_string())].into(),
+    })
+    .unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let ctl = Control::new(stop, None);
+    let mut seen = Vec::new();
+    let rep = replay
+        .run(&ctl, "test", &mut |stream, meta, p| {
+            assert_eq!(stream, "camera");
+            let Payload::Image(m) = p else { panic!() };
+            seen.push((meta.seq, m.header.stamp_sec));
+            if seen.len() == 6 {
+                ctl.stop_all();
+            }
+            Ok(())
+        })
+        .unwrap();
+    // Offset 0.25 s skips the messages at 0, 0.1 and 0.2 s: stamps 1003, 1004, then again.
+    let stamps: Vec<i32> = seen.iter().map(|s| s.1).collect();
+    assert_eq!(stamps, [1003, 1004, 1003, 1004, 1003, 1004]);
+    let seqs: Vec<u64> = seen.iter().map(|s| s.0).collect();
+    assert_eq!(
+        seqs,
+        [0, 1, 2, 3, 4, 5],
+        "sequence numbers keep counting across loops"
+    );
+    assert!(rep.damage.is_empty());
+}
+
+#[test]
+fn truncated_bag_replays_what_can_be_read_and_reports_the_damage() {
+    let dir = scratch("damaged");
+    let bytes = image_bag(&dir.join("b"), 40);
+    // Cut the file in the middle of its chunks (drops the summary too).
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let out = Command::new(bridge_exe())
+        .args(["--linger", "0.5", "replay"])
+        .arg(&cut)
+        .args(["--bus", "local", "--rate", "0", "--record"])
+        .arg(dir.join("rec"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("damage:"), "damage reported: {stdout}");
+    let mut n = 0;
+    Bag::open(&dir.join("rec"))
+        .unwrap()
+        .for_each(&Filter::default(), |_| {
+            n += 1;
+            Ok(ControlFlow::Continue(()))
+        })
+        .unwrap();
+    assert!(
+        n > 10 && n < 80,
+        "replayed the readable part: {n} of 80 messages"
+    );
+}
+
+#[test]
+fn ros1_bag_is_refused_with_a_clear_message() {
+    let Some(src) = shared_data("mcap_ouster_os1_pointcloudset/test.mcap") else {
+        return;
+    };
+    let out = Command::new(bridge_exe())
+        .arg("replay")
+        .arg(&src)
+        .args(["--bus", "local"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("ROS 1") && err.contains("rosbags-convert"),
+        "{err}"
+    );
+}
+
+#[test]
+fn not_a_bag_and_unknown_topics_name_the_problem() {
+    let dir = scratch("notbag");
+    let f = dir.join("x.mcap");
+    std::fs::write(&f, b"hello").unwrap();
+    let out = Command::new(bridge_exe())
+        .arg("replay")
+        .arg(&f)
+        .args(["--bus", "local"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("MCAP"));
+    image_bag(&dir.join("b"), 2);
+    let out = Command::new(bridge_exe())
+        .arg("replay")
+        .arg(dir.join("b"))
+        .args(["--bus", "local", "--topic", "/nope"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("no topic `/nope`") && err.contains("/cam"),
+        "{err}"
+    );
+}
+
+#[test]
+fn example_configs_are_valid() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy().to_string();
+        if name.starts_with("bridge-") && name.ends_with(".toml") {
+            perturb_bridge::config::Config::load(&p).unwrap_or_else(|e| panic!("{e}"));
+            n += 1;
+        }
+    }
+    assert!(n >= 3);
+}
