@@ -68,6 +68,14 @@ pub enum WireError {
         /// The iceoryx2 error.
         detail: String,
     },
+    /// The subscriber already holds as many frames as the service's `subscriber_borrowed` allows.
+    #[error(
+        "subscriber on `{service}` holds the most frames the service allows (subscriber_borrowed); release one first"
+    )]
+    BorrowLimit {
+        /// The service name.
+        service: String,
+    },
     /// A configuration value is wrong.
     #[error("{0}")]
     Config(String),
@@ -93,6 +101,11 @@ impl WireError {
             what: what.into(),
             detail: format!("{e:?}"),
         }
+    }
+
+    /// True for [`WireError::BorrowLimit`] (not a transport failure).
+    pub fn is_borrow_limit(&self) -> bool {
+        matches!(self, WireError::BorrowLimit { .. })
     }
 
     /// True for errors that describe a bad frame (as opposed to a transport failure): the frame is

@@ -25,7 +25,7 @@
 //! use std::time::Duration;
 //! let t = Transport::open("example", &TransportOptions::from_env()).unwrap();
 //! let qos = StreamQos::default();
-//! let mut sub = t.subscriber(&names::perturbed("cam_front"), &qos, None).unwrap();
+//! let sub = t.subscriber(&names::perturbed("cam_front"), &qos, None).unwrap();
 //! let mut publisher = t.publisher(&names::raw("cam_front"), &qos, Hop::Ingress, 1 << 20).unwrap();
 //! let img = Image::new(640, 480, PixelFormat::Rgb8);
 //! let h = FrameHeader::for_image_view(0, Stamp::default(), "cam_front", &img.view()).unwrap();

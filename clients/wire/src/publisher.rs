@@ -67,7 +67,7 @@ pub(crate) fn open_pubsub(
 /// use perturb_core::image::{Image, PixelFormat};
 /// let t = Transport::open("camera_bridge", &TransportOptions::from_env()).unwrap();
 /// let img = Image::new(800, 503, PixelFormat::Rgb8);
-/// let publisher = t
+/// let mut publisher = t
 ///     .publisher("cam_front/raw", &StreamQos::default(), Hop::Ingress, img.data.len())
 ///     .unwrap();
 /// let header = FrameHeader::for_image_view(0, Stamp::default(), "cam_front", &img.view()).unwrap();

@@ -208,23 +208,25 @@ impl FrameSubscriber {
         let _ = self.listener.try_wait(|_| {});
     }
 
-    /// The next frame, if one is queued. A transport failure recreates the ports once and
-    /// returns the error.
-    pub fn receive(&mut self) -> WireResult<Option<Frame>> {
-        match self.subscriber.receive() {
-            Ok(s) => Ok(s.map(|sample| Frame { sample })),
-            Err(e) => {
-                let err = WireError::iox(format!("receiving on `{}`", self.service), e);
-                if !matches!(e, iceoryx2::port::ReceiveError::ExceedsMaxBorrows) {
-                    self.reopen()?;
+    /// The next frame, if one is queued. On a transport failure (other than holding too many
+    /// frames, see [`WireError::is_borrow_limit`]) call [`FrameSubscriber::reopen`].
+    pub fn receive(&self) -> WireResult<Option<Frame>> {
+        self.subscriber
+            .receive()
+            .map(|s| s.map(|sample| Frame { sample }))
+            .map_err(|e| {
+                if matches!(e, iceoryx2::port::ReceiveError::ExceedsMaxBorrows) {
+                    WireError::BorrowLimit {
+                        service: self.service.clone(),
+                    }
+                } else {
+                    WireError::iox(format!("receiving on `{}`", self.service), e)
                 }
-                Err(err)
-            }
-        }
+            })
     }
 
     /// Waits up to `timeout` for a frame (blocking on the event listener, no polling).
-    pub fn wait(&mut self, timeout: Duration) -> WireResult<Option<Frame>> {
+    pub fn wait(&self, timeout: Duration) -> WireResult<Option<Frame>> {
         if let Some(f) = self.receive()? {
             return Ok(Some(f));
         }

@@ -31,7 +31,7 @@ fn pair(tag: &str) -> Pair {
 fn image_arrives_in_place_with_header_and_hop_stamp() {
     let Pair(_clean, a, b) = pair("image");
     let qos = StreamQos::default();
-    let mut sub = b.subscriber("cam/raw", &qos, None).unwrap();
+    let sub = b.subscriber("cam/raw", &qos, None).unwrap();
     let mut publisher = a.publisher("cam/raw", &qos, Hop::Ingress, 16).unwrap();
     assert!(publisher.wait_for_subscribers(1, Duration::from_secs(5)));
     let img = synthetic::street_image(64, 40, 3);
@@ -54,7 +54,7 @@ fn image_arrives_in_place_with_header_and_hop_stamp() {
 fn cloud_with_padded_rows_and_wrong_version_is_refused() {
     let Pair(_clean, a, b) = pair("cloud");
     let qos = StreamQos::default();
-    let mut sub = b.subscriber("lidar/raw", &qos, None).unwrap();
+    let sub = b.subscriber("lidar/raw", &qos, None).unwrap();
     let mut publisher = a.publisher("lidar/raw", &qos, Hop::Ingress, 1).unwrap();
     let cloud = synthetic::vlp32c_scan(0);
     let h = FrameHeader::for_cloud_view(1, Stamp::default(), "velodyne", &cloud.view()).unwrap();
@@ -82,7 +82,7 @@ fn cloud_with_padded_rows_and_wrong_version_is_refused() {
 fn header_disagreeing_with_payload_is_invalid() {
     let Pair(_clean, a, b) = pair("short");
     let qos = StreamQos::default();
-    let mut sub = b.subscriber("cam/raw", &qos, None).unwrap();
+    let sub = b.subscriber("cam/raw", &qos, None).unwrap();
     let mut publisher = a.publisher("cam/raw", &qos, Hop::Ingress, 1).unwrap();
     let img = Image::new(8, 8, PixelFormat::Rgb8);
     let h = FrameHeader::for_image_view(0, Stamp::default(), "c", &img.view()).unwrap();
