@@ -7,6 +7,7 @@ mod apply;
 mod augment;
 mod batch;
 mod bench;
+mod ctl;
 mod dataset;
 mod demo;
 mod files;
@@ -55,6 +56,8 @@ enum Command {
     Demo(demo::Args),
     /// Time every perturbation at every severity on a real frame or scan and check the budget.
     Bench(bench::Args),
+    /// Control a running perturbd: set or switch off a stream's perturbation, show status and stats.
+    Ctl(ctl::Args),
 }
 
 fn main() {
@@ -76,6 +79,7 @@ fn main() {
         Command::Info(a) => info::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Demo(a) => demo::run(a),
+        Command::Ctl(a) => ctl::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

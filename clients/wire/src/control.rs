@@ -1,0 +1,380 @@
+//! The daemon's runtime control channel: iceoryx2 request-response carrying small JSON
+//! documents, plus an event service of the same name that wakes the daemon when a request
+//! arrives (no polling on either side of the daemon).
+//!
+//! Requests are [`ControlRequest`], answers [`ControlResponse`]: `ok`, an `error` message when not
+//! ok, a `message` (the acknowledgement of a change) and, for `status` and `stats`, one
+//! [`StreamReport`] per stream.
+
+use crate::error::{WireError, WireResult};
+use crate::transport::{Ipc, Transport, service_name};
+use iceoryx2::active_request::ActiveRequest;
+use iceoryx2::port::client::Client;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::server::Server;
+use iceoryx2::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::time::{Duration, Instant};
+
+/// Version of the control documents; a daemon refuses requests of another version.
+pub const CONTROL_VERSION: u32 = 1;
+
+/// A control request.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "cmd", rename_all = "lowercase", deny_unknown_fields)]
+pub enum ControlRequest {
+    /// Activate perturbation `id` at `severity` on `stream` (seed: keep the stream's current
+    /// seed when absent).
+    Set {
+        /// Stream name.
+        stream: String,
+        /// Perturbation ID or name.
+        id: String,
+        /// Severity.
+        severity: u8,
+        /// Seed.
+        #[serde(default)]
+        seed: Option<u64>,
+    },
+    /// Forward `stream` unchanged.
+    Off {
+        /// Stream name.
+        stream: String,
+    },
+    /// The active perturbation of every stream.
+    Status,
+    /// Counters and latencies of every stream.
+    Stats,
+}
+
+/// The envelope on the wire: version + request.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ControlEnvelope {
+    /// [`CONTROL_VERSION`].
+    pub v: u32,
+    /// The request.
+    #[serde(flatten)]
+    pub request: ControlRequest,
+}
+
+/// Latency percentiles in microseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LatencySummary {
+    /// Samples recorded.
+    pub count: u64,
+    /// Median.
+    pub p50_us: f64,
+    /// 99th percentile.
+    pub p99_us: f64,
+    /// Largest.
+    pub max_us: f64,
+    /// Mean.
+    pub mean_us: f64,
+}
+
+/// Latencies of one stream.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StreamLatency {
+    /// Computing the perturbation (or the copy when off) into the output sample.
+    pub perturb: LatencySummary,
+    /// Ingress publish to daemon receive (the shared-memory hop and the wake-up).
+    pub ingress_to_rx: LatencySummary,
+    /// Daemon receive to daemon publish (queueing, perturbation, publish).
+    pub rx_to_tx: LatencySummary,
+    /// Ingress publish to daemon publish: what the budget applies to.
+    pub ingress_to_tx: LatencySummary,
+}
+
+/// One stream's state and counters, as `perturb ctl status|stats --json` prints them.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StreamReport {
+    /// Stream name.
+    pub name: String,
+    /// `camera` or `lidar`.
+    pub modality: String,
+    /// Input service.
+    pub input: String,
+    /// Output service.
+    pub output: String,
+    /// Active perturbation ID (null when off).
+    pub id: Option<String>,
+    /// Its name in the catalogue.
+    pub perturbation: Option<String>,
+    /// Active severity (null when off).
+    pub severity: Option<u8>,
+    /// Seed used when a perturbation is active.
+    pub seed: u64,
+    /// Frames received from the input service.
+    pub frames_in: u64,
+    /// Frames published on the output service.
+    pub frames_out: u64,
+    /// Frames dropped, all causes: `dropped_queue + dropped_upstream + dropped_output`.
+    pub dropped: u64,
+    /// Dropped because the worker fell behind (oldest pending frame replaced).
+    pub dropped_queue: u64,
+    /// Missing sequence numbers on the input (overwritten in the input queue before the
+    /// receiver got them, or lost before the daemon).
+    pub dropped_upstream: u64,
+    /// Perturbed but could not be published (no output sample, transport failure).
+    pub dropped_output: u64,
+    /// Frames refused as invalid (counted, logged, skipped).
+    pub invalid: u64,
+    /// Frames whose perturbation failed; forwarded unperturbed (their header says so).
+    pub perturb_failed: u64,
+    /// Frames whose ingress-to-publish latency exceeded the budget.
+    pub over_budget: u64,
+    /// The stream's budget in milliseconds.
+    pub budget_ms: f64,
+    /// Sequence number of the last frame received.
+    pub last_seq: Option<u64>,
+    /// Latencies (in `stats` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latency: Option<StreamLatency>,
+}
+
+/// An answer.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ControlResponse {
+    /// True if the request was carried out.
+    pub ok: bool,
+    /// Why not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// The acknowledgement.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub message: Option<String>,
+    /// Per-stream reports (status, stats).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub streams: Option<Vec<StreamReport>>,
+}
+
+impl ControlResponse {
+    /// A failure with a message.
+    pub fn error(msg: impl Into<String>) -> Self {
+        ControlResponse {
+            ok: false,
+            error: Some(msg.into()),
+            ..Default::default()
+        }
+    }
+
+    /// A success with an acknowledgement.
+    pub fn ack(msg: impl Into<String>) -> Self {
+        ControlResponse {
+            ok: true,
+            message: Some(msg.into()),
+            ..Default::default()
+        }
+    }
+}
+
+type RrClient = Client<Ipc, [u8], (), [u8], ()>;
+type RrServer = Server<Ipc, [u8], (), [u8], ()>;
+
+/// The client side (`perturb ctl`).
+pub struct ControlClient {
+    service: String,
+    client: RrClient,
+    notifier: Notifier<Ipc>,
+}
+
+impl std::fmt::Debug for ControlClient {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ControlClient")
+            .field("service", &self.service)
+            .finish()
+    }
+}
+
+impl ControlClient {
+    /// Connects to the daemon's control service (which must exist).
+    pub fn connect(transport: &Transport, service: &str) -> WireResult<Self> {
+        let name = service_name(service)?;
+        let not_running = |e: &dyn std::fmt::Debug| {
+            let d = format!("{e:?}");
+            if d.contains("DoesNotExist") {
+                WireError::NoSuchService {
+                    service: service.to_string(),
+                    hint: format!(
+                        "no perturbd is serving it in this iceoryx2 namespace ({}); start `perturbd --config FILE`, or point at its namespace with --iox2-prefix/--iox2-root",
+                        transport.options().describe()
+                    ),
+                }
+            } else {
+                WireError::iox(format!("opening control service `{service}`"), d)
+            }
+        };
+        let rr = transport
+            .node()
+            .service_builder(&name)
+            .request_response::<[u8], [u8]>()
+            .open()
+            .map_err(|e| not_running(&e))?;
+        let ev = transport
+            .node()
+            .service_builder(&name)
+            .event()
+            .open()
+            .map_err(|e| not_running(&e))?;
+        let client = rr
+            .client_builder()
+            .initial_max_slice_len(1024)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| WireError::iox("creating the control client", e))?;
+        let notifier = ev
+            .notifier_builder()
+            .create()
+            .map_err(|e| WireError::iox("creating the control notifier", e))?;
+        Ok(ControlClient {
+            service: service.to_string(),
+            client,
+            notifier,
+        })
+    }
+
+    /// Sends `request` and waits up to `timeout` for the answer.
+    pub fn request(
+        &self,
+        request: &ControlRequest,
+        timeout: Duration,
+    ) -> WireResult<ControlResponse> {
+        let body = serde_json::to_vec(&ControlEnvelope {
+            v: CONTROL_VERSION,
+            request: request.clone(),
+        })
+        .map_err(|e| WireError::Control(format!("encoding the request: {e}")))?;
+        let loan = self
+            .client
+            .loan_slice_uninit(body.len())
+            .map_err(|e| WireError::iox("loaning a control request", e))?;
+        let pending = loan
+            .write_from_slice(&body)
+            .send()
+            .map_err(|e| WireError::iox("sending the control request", e))?;
+        let _ = self.notifier.notify();
+        let start = Instant::now();
+        loop {
+            if let Some(resp) = pending
+                .receive()
+                .map_err(|e| WireError::iox("receiving the control response", e))?
+            {
+                return serde_json::from_slice(resp.payload()).map_err(|e| {
+                    WireError::Control(format!("perturbd sent an unreadable answer: {e}"))
+                });
+            }
+            if start.elapsed() > timeout {
+                return Err(WireError::Control(format!(
+                    "perturbd did not answer on `{}` within {:.1} s (is it running and not stuck?)",
+                    self.service,
+                    timeout.as_secs_f64()
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+}
+
+/// The daemon side.
+pub struct ControlServer {
+    service: String,
+    server: RrServer,
+    listener: Listener<Ipc>,
+}
+
+impl std::fmt::Debug for ControlServer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ControlServer")
+            .field("service", &self.service)
+            .finish()
+    }
+}
+
+impl ControlServer {
+    /// Creates (or opens) the control service and serves it.
+    pub fn create(transport: &Transport, service: &str) -> WireResult<Self> {
+        let name = service_name(service)?;
+        let rr = transport
+            .node()
+            .service_builder(&name)
+            .request_response::<[u8], [u8]>()
+            .max_servers(2)
+            .max_clients(16)
+            .open_or_create()
+            .map_err(|e| crate::transport::open_error(service, e))?;
+        let ev = transport
+            .node()
+            .service_builder(&name)
+            .event()
+            .max_listeners(4)
+            .max_notifiers(32)
+            .open_or_create()
+            .map_err(|e| crate::transport::open_error(service, e))?;
+        let server = rr
+            .server_builder()
+            .initial_max_slice_len(64 * 1024)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| WireError::iox("creating the control server", e))?;
+        let listener = ev
+            .listener_builder()
+            .create()
+            .map_err(|e| WireError::iox("creating the control listener", e))?;
+        Ok(ControlServer {
+            service: service.to_string(),
+            server,
+            listener,
+        })
+    }
+
+    /// The service name.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// The listener to attach to a WaitSet.
+    pub fn listener(&self) -> &Listener<Ipc> {
+        &self.listener
+    }
+
+    /// Answers every pending request with `handler`; returns how many were handled.
+    pub fn serve(
+        &self,
+        mut handler: impl FnMut(ControlRequest) -> ControlResponse,
+    ) -> WireResult<usize> {
+        let _ = self.listener.try_wait(|_| {});
+        let mut n = 0;
+        while let Some(active) = self
+            .server
+            .receive()
+            .map_err(|e| WireError::iox("receiving a control request", e))?
+        {
+            n += 1;
+            let resp = match serde_json::from_slice::<ControlEnvelope>(active.payload()) {
+                Ok(env) if env.v == CONTROL_VERSION => handler(env.request),
+                Ok(env) => ControlResponse::error(format!(
+                    "control protocol version {} is not supported (this perturbd speaks {CONTROL_VERSION})",
+                    env.v
+                )),
+                Err(e) => ControlResponse::error(format!("malformed control request: {e}")),
+            };
+            respond(&active, &resp)?;
+        }
+        Ok(n)
+    }
+}
+
+fn respond(
+    active: &ActiveRequest<Ipc, [u8], (), [u8], ()>,
+    resp: &ControlResponse,
+) -> WireResult<()> {
+    let body = serde_json::to_vec(resp)
+        .map_err(|e| WireError::Control(format!("encoding a control response: {e}")))?;
+    let loan = active
+        .loan_slice_uninit(body.len())
+        .map_err(|e| WireError::iox("loaning a control response", e))?;
+    loan.write_from_slice(&body)
+        .send()
+        .map_err(|e| WireError::iox("sending a control response", e))
+}

@@ -1,0 +1,251 @@
+//! Receiving frames: a subscriber and the listener of the stream's event service, for a WaitSet or
+//! a plain blocking wait, and frames read in place.
+
+use crate::error::{WireError, WireResult};
+use crate::header::{FrameHeader, WireModality};
+use crate::publisher::open_pubsub;
+use crate::transport::{Ipc, StreamQos};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use perturb_core::cloud::{CloudView, PointLayout};
+use perturb_core::image::ImageView;
+use std::sync::Arc;
+use std::time::Duration;
+
+type PubSub = publish_subscribe::PortFactory<Ipc, [u8], FrameHeader>;
+
+/// Identifies the publisher a frame came from (a restarted publisher gets a new one).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Origin(u128);
+
+/// A received frame: the shared-memory sample, read in place. Dropping it hands the memory back
+/// to the publisher. Frames may be sent to another thread.
+pub struct Frame {
+    sample: Sample<Ipc, [u8], FrameHeader>,
+}
+
+impl std::fmt::Debug for Frame {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Frame")
+            .field("seq", &self.header().seq)
+            .field("len", &self.payload().len())
+            .finish()
+    }
+}
+
+impl Frame {
+    /// The header.
+    pub fn header(&self) -> &FrameHeader {
+        self.sample.user_header()
+    }
+
+    /// The whole payload (may be longer than the valid data, see [`Frame::data`]).
+    pub fn payload(&self) -> &[u8] {
+        self.sample.payload()
+    }
+
+    /// The valid bytes (`header.data_len`), after the version check.
+    pub fn data(&self) -> WireResult<&[u8]> {
+        self.header().valid_bytes(self.payload())
+    }
+
+    /// Which publisher sent it.
+    pub fn origin(&self) -> Origin {
+        Origin(self.sample.origin().value())
+    }
+
+    /// Checks header and payload agree (see [`FrameHeader::validate`]).
+    pub fn validate(&self) -> WireResult<WireModality> {
+        self.header().validate(self.payload().len())
+    }
+
+    /// The image, in place (validated).
+    pub fn image(&self) -> WireResult<ImageView<'_>> {
+        match self.validate()? {
+            WireModality::Camera => self.header().image_view(self.payload()),
+            WireModality::Lidar => Err(WireError::invalid("expected an image, got a point cloud")),
+        }
+    }
+
+    /// The point cloud, in place (validated; parses the layout).
+    pub fn cloud(&self) -> WireResult<CloudView<'_>> {
+        self.cloud_cached(&mut LayoutCache::default())
+    }
+
+    /// The point cloud, in place, reusing the layout parsed for an earlier frame when it is the
+    /// same.
+    pub fn cloud_cached(&self, cache: &mut LayoutCache) -> WireResult<CloudView<'_>> {
+        match self.validate()? {
+            WireModality::Lidar => {
+                let layout = cache.layout_for(self.header())?;
+                self.header().cloud_view(self.payload(), layout)
+            }
+            WireModality::Camera => Err(WireError::invalid("expected a point cloud, got an image")),
+        }
+    }
+}
+
+/// The last parsed point layout, so a stream of clouds with one layout parses it once.
+#[derive(Debug, Default)]
+pub struct LayoutCache {
+    last: Option<(FrameHeader, Arc<PointLayout>)>,
+}
+
+impl LayoutCache {
+    /// The layout `header` describes.
+    pub fn layout_for(&mut self, header: &FrameHeader) -> WireResult<Arc<PointLayout>> {
+        if let Some((h, l)) = &self.last
+            && h.same_layout(header)
+        {
+            return Ok(l.clone());
+        }
+        let l = Arc::new(header.point_layout()?);
+        self.last = Some((*header, l.clone()));
+        Ok(l)
+    }
+}
+
+/// A subscriber of camera or LiDAR frames on one service, with the listener that wakes it.
+///
+/// Attach [`FrameSubscriber::listener`] to a WaitSet (or call [`FrameSubscriber::wait`]); on a
+/// wake-up call [`FrameSubscriber::drain_notifications`] first, then [`FrameSubscriber::receive`]
+/// until it returns `None`, so no frame waits for the next notification.
+pub struct FrameSubscriber {
+    service: String,
+    buffer: usize,
+    pubsub: PubSub,
+    event: event::PortFactory<Ipc>,
+    subscriber: Subscriber<Ipc, [u8], FrameHeader>,
+    listener: Listener<Ipc>,
+    reconnects: u64,
+}
+
+impl std::fmt::Debug for FrameSubscriber {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FrameSubscriber")
+            .field("service", &self.service)
+            .field("buffer", &self.buffer)
+            .finish()
+    }
+}
+
+impl FrameSubscriber {
+    pub(crate) fn open(
+        node: &Node<Ipc>,
+        service: &str,
+        qos: &StreamQos,
+        buffer: Option<usize>,
+    ) -> WireResult<Self> {
+        let buffer = buffer
+            .unwrap_or(qos.subscriber_buffer)
+            .clamp(1, qos.subscriber_buffer);
+        let (pubsub, event) = open_pubsub(node, service, qos)?;
+        let (subscriber, listener) = Self::ports(&pubsub, &event, service, buffer)?;
+        Ok(FrameSubscriber {
+            service: service.to_string(),
+            buffer,
+            pubsub,
+            event,
+            subscriber,
+            listener,
+            reconnects: 0,
+        })
+    }
+
+    fn ports(
+        pubsub: &PubSub,
+        event: &event::PortFactory<Ipc>,
+        service: &str,
+        buffer: usize,
+    ) -> WireResult<(Subscriber<Ipc, [u8], FrameHeader>, Listener<Ipc>)> {
+        let subscriber = pubsub
+            .subscriber_builder()
+            .buffer_size(buffer)
+            .create()
+            .map_err(|e| WireError::iox(format!("creating a subscriber on `{service}`"), e))?;
+        let listener = event
+            .listener_builder()
+            .create()
+            .map_err(|e| WireError::iox(format!("creating a listener on `{service}`"), e))?;
+        Ok((subscriber, listener))
+    }
+
+    /// Replaces the iceoryx2 ports with new ones (after a transport failure).
+    pub fn reopen(&mut self) -> WireResult<()> {
+        // Drop the old ports first so the service has room for the new ones.
+        let (s, l) = Self::ports(&self.pubsub, &self.event, &self.service, self.buffer)?;
+        self.subscriber = s;
+        self.listener = l;
+        self.reconnects += 1;
+        Ok(())
+    }
+
+    /// The service name.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// How often the ports were recreated after a failure.
+    pub fn reconnects(&self) -> u64 {
+        self.reconnects
+    }
+
+    /// Publishers currently connected to the service.
+    pub fn publisher_count(&self) -> usize {
+        self.pubsub.dynamic_config().number_of_publishers()
+    }
+
+    /// The listener to attach to a WaitSet.
+    pub fn listener(&self) -> &Listener<Ipc> {
+        &self.listener
+    }
+
+    /// Consumes pending wake-ups (call before draining frames with [`FrameSubscriber::receive`]).
+    pub fn drain_notifications(&self) {
+        let _ = self.listener.try_wait(|_| {});
+    }
+
+    /// The next frame, if one is queued. On a transport failure (other than holding too many
+    /// frames, see [`WireError::is_borrow_limit`]) call [`FrameSubscriber::reopen`].
+    pub fn receive(&self) -> WireResult<Option<Frame>> {
+        self.subscriber
+            .receive()
+            .map(|s| s.map(|sample| Frame { sample }))
+            .map_err(|e| {
+                if matches!(e, iceoryx2::port::ReceiveError::ExceedsMaxBorrows) {
+                    WireError::BorrowLimit {
+                        service: self.service.clone(),
+                    }
+                } else {
+                    WireError::iox(format!("receiving on `{}`", self.service), e)
+                }
+            })
+    }
+
+    /// Waits up to `timeout` for a frame (blocking on the event listener, no polling).
+    pub fn wait(&self, timeout: Duration) -> WireResult<Option<Frame>> {
+        if let Some(f) = self.receive()? {
+            return Ok(Some(f));
+        }
+        self.listener
+            .timed_wait(|_| {}, timeout)
+            .map_err(|e| WireError::iox(format!("waiting on `{}`", self.service), e))?;
+        self.drain_notifications();
+        self.receive()
+    }
+}
+
+#[cfg(test)]
+mod send_checks {
+    fn assert_send<T: Send>() {}
+    #[test]
+    fn frames_and_ports_move_between_threads() {
+        assert_send::<super::Frame>();
+        assert_send::<super::FrameSubscriber>();
+        assert_send::<crate::FramePublisher>();
+        assert_send::<crate::Transport>();
+    }
+}

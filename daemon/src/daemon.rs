@@ -1,0 +1,283 @@
+//! The daemon's life: sweep stale shared memory, open every stream's services, start the
+//! workers, serve the control channel and log statistics until SIGINT/SIGTERM, then stop the
+//! workers, write the JSON report and exit.
+
+use crate::config::Config;
+use crate::perturbation::{self, Active};
+use crate::worker::{self, StreamRuntime};
+use perturb_wire::control::{
+    ControlClient, ControlRequest, ControlResponse, ControlServer, StreamReport,
+};
+use perturb_wire::iceoryx2::prelude::*;
+use perturb_wire::iceoryx2::waitset::WaitSetRunResult;
+use perturb_wire::{Hop, Ipc, Transport, TransportOptions};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use tracing::{error, info, warn};
+
+/// What the daemon writes on exit.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    /// The configuration file.
+    pub config: PathBuf,
+    /// Unix time of the start, seconds.
+    pub started_unix_s: f64,
+    /// Seconds the daemon ran.
+    pub duration_s: f64,
+    /// Why it stopped.
+    pub stopped_by: String,
+    /// One entry per stream, as `perturb ctl stats --json`.
+    pub streams: Vec<StreamReport>,
+}
+
+/// Runs the daemon until a termination signal. `report_path` overrides `[daemon] report`.
+pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let started_unix_s = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0);
+    let options: TransportOptions = cfg.transport.clone().with_env_overrides();
+    let transport = Transport::open("perturbd", &options)?;
+    info!(
+        config = %config_path.display(),
+        namespace = %options.describe(),
+        streams = cfg.streams.len(),
+        "perturbd starting"
+    );
+
+    let sweep = transport.sweep_dead_nodes()?;
+    if sweep.removed > 0 || sweep.failed > 0 {
+        info!(
+            removed = sweep.removed,
+            failed = sweep.failed,
+            alive = sweep.alive,
+            "removed stale shared memory of dead processes"
+        );
+    }
+
+    let control_service = cfg.daemon.control_service.as_str();
+    if let Ok(client) = ControlClient::connect(&transport, control_service)
+        && client
+            .request(&ControlRequest::Status, Duration::from_millis(500))
+            .is_ok()
+    {
+        anyhow::bail!(
+            "another perturbd already serves `{control_service}` in this iceoryx2 namespace ({}); stop it first",
+            options.describe()
+        );
+    }
+    let server = ControlServer::create(&transport, control_service)?;
+
+    // Open every stream's services before starting any worker, so a bad stream stops the
+    // daemon before it touches the others. The output goes first: once the input has its
+    // subscriber (what a publisher waits for), the output is ready too.
+    let shutdown = Arc::new(AtomicBool::new(false));
+    let mut streams = Vec::new();
+    let mut ports = Vec::new();
+    for s in &cfg.streams {
+        let initial: Option<Active> = match &s.perturbation {
+            Some(p) => Some(
+                perturbation::build(s, &p.id, p.severity, p.seed, None)
+                    .map(|(_, a)| a)
+                    .map_err(|e| anyhow::anyhow!("stream `{}`: {e}", s.name))?,
+            ),
+            None => None,
+        };
+        let output = transport
+            .publisher(&s.output_service(), &s.qos, Hop::Keep, 1)
+            .map_err(|e| anyhow::anyhow!("stream `{}` output: {e}", s.name))?;
+        let input = transport
+            .subscriber(&s.input_service(), &s.qos, None)
+            .map_err(|e| anyhow::anyhow!("stream `{}` input: {e}", s.name))?;
+        let rt = Arc::new(StreamRuntime::new(
+            s.clone(),
+            initial.as_ref().map(|a| a.spec()),
+        ));
+        info!(
+            stream = s.name.as_str(),
+            modality = s.modality.as_str(),
+            input = %s.input_service(),
+            output = %s.output_service(),
+            sensor = s.sensor_model().map(|m| m.name).unwrap_or("-"),
+            perturbation = initial
+                .as_ref()
+                .map(|a| format!("{} severity {} seed {}", a.spec().entry.id, a.spec().severity, a.spec().seed))
+                .unwrap_or_else(|| "off".into()),
+            budget_ms = s.budget(),
+            "stream configured"
+        );
+        ports.push((rt.clone(), input, output, initial));
+        streams.push(rt);
+    }
+    let mut threads = Vec::new();
+    for (rt, input, output, initial) in ports {
+        threads.extend(worker::spawn(rt, input, output, initial, shutdown.clone())?);
+    }
+    info!(control = control_service, "perturbd ready");
+
+    let stopped_by = serve(&server, &streams, cfg.daemon.stats_interval_s);
+    info!(reason = stopped_by.as_str(), "perturbd stopping");
+    shutdown.store(true, Ordering::Relaxed);
+    for t in threads {
+        if t.join().is_err() {
+            error!("a worker thread panicked");
+        }
+    }
+    log_stats(&streams);
+    let report = Report {
+        config: config_path.to_path_buf(),
+        started_unix_s,
+        duration_s: started.elapsed().as_secs_f64(),
+        stopped_by,
+        streams: streams.iter().map(|s| s.report(true)).collect(),
+    };
+    let path = report_path
+        .or(cfg.daemon.report.clone())
+        .unwrap_or_else(|| PathBuf::from("perturbd-report.json"));
+    let json = serde_json::to_string_pretty(&report_value(&report))?;
+    std::fs::write(&path, json + "\n")
+        .map_err(|e| anyhow::anyhow!("cannot write the report {}: {e}", path.display()))?;
+    info!(report = %path.display(), "report written");
+    Ok(())
+}
+
+fn report_value(r: &Report) -> serde_json::Value {
+    serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
+}
+
+/// The control and statistics loop; returns why it stopped.
+fn serve(server: &ControlServer, streams: &[Arc<StreamRuntime>], stats_interval_s: f64) -> String {
+    let waitset = match WaitSetBuilder::new().create::<Ipc>() {
+        Ok(w) => w,
+        Err(e) => return format!("cannot create the main WaitSet: {e:?}"),
+    };
+    let control = match waitset.attach_notification(server.listener()) {
+        Ok(g) => g,
+        Err(e) => return format!("cannot attach the control listener: {e:?}"),
+    };
+    // Also wakes regularly to notice a termination signal delivered to another thread and to
+    // log statistics.
+    let _tick = match waitset.attach_interval(Duration::from_millis(250)) {
+        Ok(g) => g,
+        Err(e) => return format!("cannot attach the tick: {e:?}"),
+    };
+    let mut last_log = Instant::now();
+    loop {
+        let r = waitset.wait_and_process_once(|id| {
+            if id.has_event_from(&control)
+                && let Err(e) = server.serve(|req| handle(streams, req))
+            {
+                warn!("control channel: {e}");
+            }
+            CallbackProgression::Continue
+        });
+        match r {
+            Ok(WaitSetRunResult::TerminationRequest) => return "SIGINT/SIGTERM".into(),
+            Ok(_) => {}
+            Err(e) => return format!("WaitSet failed: {e:?}"),
+        }
+        if stats_interval_s > 0.0 && last_log.elapsed().as_secs_f64() >= stats_interval_s {
+            last_log = Instant::now();
+            log_stats(streams);
+        }
+    }
+}
+
+fn ms(us: f64) -> String {
+    format!("{:.2}", us / 1000.0)
+}
+
+fn log_stats(streams: &[Arc<StreamRuntime>]) {
+    for s in streams {
+        let r = s.report(true);
+        let l = r.latency.clone().unwrap_or_default();
+        info!(
+            stream = r.name.as_str(),
+            active = r.id.as_deref().unwrap_or("off"),
+            frames_in = r.frames_in,
+            frames_out = r.frames_out,
+            dropped = r.dropped,
+            invalid = r.invalid,
+            over_budget = r.over_budget,
+            perturb_p50_ms = %ms(l.perturb.p50_us),
+            perturb_p99_ms = %ms(l.perturb.p99_us),
+            hop_p50_ms = %ms(l.ingress_to_rx.p50_us),
+            daemon_p50_ms = %ms(l.rx_to_tx.p50_us),
+            daemon_p99_ms = %ms(l.rx_to_tx.p99_us),
+            daemon_max_ms = %ms(l.rx_to_tx.max_us),
+            "stats"
+        );
+    }
+}
+
+/// Answers one control request.
+pub fn handle(streams: &[Arc<StreamRuntime>], req: ControlRequest) -> ControlResponse {
+    let find = |name: &str| {
+        streams
+            .iter()
+            .find(|s| s.config.name == name)
+            .ok_or_else(|| {
+                let known: Vec<&str> = streams.iter().map(|s| s.config.name.as_str()).collect();
+                ControlResponse::error(format!(
+                    "unknown stream `{name}` (streams: {})",
+                    known.join(", ")
+                ))
+            })
+    };
+    match req {
+        ControlRequest::Set {
+            stream,
+            id,
+            severity,
+            seed,
+        } => {
+            let rt = match find(&stream) {
+                Ok(r) => r,
+                Err(e) => return e,
+            };
+            let seed = seed.unwrap_or_else(|| rt.current_seed());
+            match perturbation::build(&rt.config, &id, severity, seed, rt.last_geometry()) {
+                Ok((spec, active)) => {
+                    rt.set(active);
+                    info!(
+                        stream = stream.as_str(),
+                        id = spec.entry.id,
+                        severity,
+                        seed,
+                        "control: set"
+                    );
+                    ControlResponse::ack(format!(
+                        "{stream}: {} ({}) severity {severity} seed {seed}, active from the next frame",
+                        spec.entry.id, spec.entry.name
+                    ))
+                }
+                Err(e) => ControlResponse::error(format!("stream `{stream}`: {e}")),
+            }
+        }
+        ControlRequest::Off { stream } => {
+            let rt = match find(&stream) {
+                Ok(r) => r,
+                Err(e) => return e,
+            };
+            rt.off();
+            info!(stream = stream.as_str(), "control: off");
+            ControlResponse::ack(format!(
+                "{stream}: perturbation off, frames forwarded unchanged from the next frame"
+            ))
+        }
+        ControlRequest::Status => ControlResponse {
+            ok: true,
+            streams: Some(streams.iter().map(|s| s.report(false)).collect()),
+            ..Default::default()
+        },
+        ControlRequest::Stats => ControlResponse {
+            ok: true,
+            streams: Some(streams.iter().map(|s| s.report(true)).collect()),
+            ..Default::default()
+        },
+    }
+}
