@@ -174,7 +174,6 @@ macro_rules! entry {
     };
 }
 
-use Builder::Missing;
 
 /// Every perturbation, camera first, in ID order.
 #[rustfmt::skip]
@@ -285,6 +284,7 @@ mod tests {
             };
             assert!(e.id.starts_with(prefix), "{}", e.id);
             assert!(!e.description.is_empty() && !e.name.contains(' '));
+            assert!(e.is_implemented(), "{} is not implemented", e.id);
             match (e.modality, e.build) {
                 (Modality::Camera, Builder::Lidar(_)) | (Modality::Lidar, Builder::Camera(_)) => {
                     panic!("{} has a builder of the other modality", e.id)
