@@ -246,7 +246,10 @@ impl Config {
             if let Some(b) = s.budget_ms
                 && !(b > 0.0 && b.is_finite())
             {
-                return Err(format!("{}: {b} must be a positive number", key("budget_ms")));
+                return Err(format!(
+                    "{}: {b} must be a positive number",
+                    key("budget_ms")
+                ));
             }
             if !(1..=2).contains(&s.queue_depth) {
                 return Err(format!(
@@ -255,7 +258,9 @@ impl Config {
                     s.queue_depth
                 ));
             }
-            s.qos.validate().map_err(|e| format!("{}: {e}", key("qos")))?;
+            s.qos
+                .validate()
+                .map_err(|e| format!("{}: {e}", key("qos")))?;
             if s.qos.subscriber_borrowed < s.queue_depth + 2 {
                 return Err(format!(
                     "{}: {} is too small for queue_depth {}: the daemon holds queue_depth + 2 frames, set it to at least {}",
@@ -343,15 +348,24 @@ mod tests {
         let e = err(&GOOD.replace("sensor = \"vlp32c\"", ""));
         assert!(e.contains("streams[1] (lidar).sensor: missing"), "{e}");
         let e = err(&GOOD.replace("severity = 3", "severity = 9"));
-        assert!(e.contains("streams[0] (cam).perturbation") && e.contains("1..=5"), "{e}");
+        assert!(
+            e.contains("streams[0] (cam).perturbation") && e.contains("1..=5"),
+            "{e}"
+        );
         let e = err(&GOOD.replace("C-A1", "C-Z9"));
         assert!(e.contains("C-Z9"), "{e}");
         let e = err(&GOOD.replace("C-A1", "L-C1"));
         assert!(e.contains("camera stream") && e.contains("LiDAR"), "{e}");
         let e = err(&GOOD.replace("\"vlp32c\"", "\"vlp99\""));
-        assert!(e.contains("streams[1] (lidar).sensor") && e.contains("vlp99"), "{e}");
+        assert!(
+            e.contains("streams[1] (lidar).sensor") && e.contains("vlp99"),
+            "{e}"
+        );
         let e = err(&GOOD.replace("name = \"lidar\"", "name = \"cam\""));
-        assert!(e.contains("streams[1].name") && e.contains("two streams"), "{e}");
+        assert!(
+            e.contains("streams[1].name") && e.contains("two streams"),
+            "{e}"
+        );
         let e = err(&format!("{GOOD}\nqueue_depth = 5\n"));
         assert!(e.contains("queue_depth"), "{e}");
         let e = err("[daemon]\n");

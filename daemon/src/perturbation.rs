@@ -77,15 +77,13 @@ pub fn build(
         }
         Modality::Lidar => {
             let sensor = stream.sensor_model()?;
-            let mut p =
-                LidarPerturber::from_spec(spec, sensor).map_err(|e| e.to_string())?;
+            let mut p = LidarPerturber::from_spec(spec, sensor).map_err(|e| e.to_string())?;
             // A dry run on an empty cloud finds the perturbations that need inputs the daemon
             // does not have (object boxes from a detector or the dataset's labels).
             let layout = Arc::new(PointLayout::xyzi_f32());
             let empty = CloudView::new(layout, &[], 0, 1, 0, true).map_err(|e| e.to_string())?;
-            p.apply(&empty, &mut [], 0, None).map_err(|e| {
-                format!("{} cannot run in the daemon: {e}", entry.id)
-            })?;
+            p.apply(&empty, &mut [], 0, None)
+                .map_err(|e| format!("{} cannot run in the daemon: {e}", entry.id))?;
             Active::Lidar(Box::new(p))
         }
     };

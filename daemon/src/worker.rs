@@ -243,7 +243,10 @@ fn receive_loop(
             let _guard = match waitset.attach_notification(sub.listener()) {
                 Ok(g) => g,
                 Err(e) => {
-                    error!(stream = name, "cannot attach the input listener: {e:?}; retrying");
+                    error!(
+                        stream = name,
+                        "cannot attach the input listener: {e:?}; retrying"
+                    );
                     std::thread::sleep(Duration::from_secs(1));
                     continue;
                 }
@@ -292,11 +295,12 @@ fn receive_loop(
                 }
             }
         }
-        if broken {
-            if let Err(e) = sub.reopen() {
-                error!(stream = name, "cannot reopen the input: {e}; retrying in 1 s");
-                std::thread::sleep(Duration::from_secs(1));
-            }
+        if broken && let Err(e) = sub.reopen() {
+            error!(
+                stream = name,
+                "cannot reopen the input: {e}; retrying in 1 s"
+            );
+            std::thread::sleep(Duration::from_secs(1));
         }
     }
     debug!(stream = name, "receiver stopped");
@@ -366,12 +370,7 @@ fn process_loop(
 }
 
 fn invalid(rt: &StreamRuntime, seq: u64, e: &WireError) {
-    let n = rt
-        .stats
-        .counters
-        .invalid
-        .fetch_add(1, Ordering::Relaxed)
-        + 1;
+    let n = rt.stats.counters.invalid.fetch_add(1, Ordering::Relaxed) + 1;
     if should_log(n) {
         warn!(
             stream = rt.config.name.as_str(),
@@ -471,11 +470,7 @@ fn process_one(
         }
     }
     let budget_ns = (rt.config.budget() * 1e6) as u64;
-    let mut lat = rt
-        .stats
-        .latencies
-        .lock()
-        .unwrap_or_else(|p| p.into_inner());
+    let mut lat = rt.stats.latencies.lock().unwrap_or_else(|p| p.into_inner());
     lat.perturb.record(t1.saturating_sub(t0));
     lat.rx_to_tx.record(t_tx.saturating_sub(t_rx));
     let total = if h.t_ingress_ns != 0 && h.t_ingress_ns <= t_rx {

@@ -174,7 +174,6 @@ macro_rules! entry {
     };
 }
 
-
 /// Every perturbation, camera first, in ID order.
 #[rustfmt::skip]
 pub static CATALOGUE: &[Entry] = &[

@@ -60,6 +60,9 @@ pub(crate) fn open_pubsub(
     Ok((pubsub, event))
 }
 
+/// A publish-subscribe port and its event port.
+type FramePorts = (Publisher<Ipc, [u8], FrameHeader>, Notifier<Ipc>);
+
 /// A publisher of camera or LiDAR frames on one service.
 ///
 /// ```no_run
@@ -179,7 +182,7 @@ impl FramePublisher {
         service: &str,
         qos: &StreamQos,
         initial_len: usize,
-    ) -> WireResult<(Publisher<Ipc, [u8], FrameHeader>, Notifier<Ipc>)> {
+    ) -> WireResult<FramePorts> {
         let publisher = pubsub
             .publisher_builder()
             .initial_max_slice_len(initial_len.max(1))

@@ -17,6 +17,9 @@ use std::time::Duration;
 
 type PubSub = publish_subscribe::PortFactory<Ipc, [u8], FrameHeader>;
 
+/// A publish-subscribe port and its event port.
+type FramePorts = (Subscriber<Ipc, [u8], FrameHeader>, Listener<Ipc>);
+
 /// Identifies the publisher a frame came from (a restarted publisher gets a new one).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Origin(u128);
@@ -160,7 +163,7 @@ impl FrameSubscriber {
         event: &event::PortFactory<Ipc>,
         service: &str,
         buffer: usize,
-    ) -> WireResult<(Subscriber<Ipc, [u8], FrameHeader>, Listener<Ipc>)> {
+    ) -> WireResult<FramePorts> {
         let subscriber = pubsub
             .subscriber_builder()
             .buffer_size(buffer)

@@ -35,9 +35,16 @@ use crate::rng::Rng;
 /// 3D-Corruptions-AD's snowfall settings at its levels 1..5: (rain rate rr in mm/h, occupancy);
 /// severities 1, 2, 3 use levels 1, 3, 5. From (snowfall mm/h, terminal velocity m/s) =
 /// (0.5, 1.8), (2.5, 1.4), (1.0, 0.2), (1.5, 0.2), (2.5, 0.2).
-pub const HAHNER_SNOW: [(f64, f64); 5] = [(2.62, 7.7e-7), (42.7, 4.96e-6), (200.2, 1.39e-5), (367.8, 2.08e-5), (791.4, 3.47e-5)];
+pub const HAHNER_SNOW: [(f64, f64); 5] = [
+    (2.62, 7.7e-7),
+    (42.7, 4.96e-6),
+    (200.2, 1.39e-5),
+    (367.8, 2.08e-5),
+    (791.4, 3.47e-5),
+];
 /// MultiCorrupt's settings at its levels 1..3 (from (0.5, 1.2), (2.5, 1.6), (1.5, 0.4)).
-pub const MULTICORRUPT_SNOW: [(f64, f64); 3] = [(4.82, 1.16e-6), (34.97, 4.34e-6), (130.0, 1.04e-5)];
+pub const MULTICORRUPT_SNOW: [(f64, f64); 3] =
+    [(4.82, 1.16e-6), (34.97, 4.34e-6), (130.0, 1.04e-5)];
 
 /// Radius of the disc the flakes are scattered in, metres.
 pub const R0: f64 = 80.0;
@@ -91,8 +98,14 @@ pub fn flake_set(rng: &mut Rng, rr: f64, occ: f64) -> FlakeSet {
         });
     }
     flakes.sort_by(|a, b| a.azimuth.total_cmp(&b.azimuth));
-    let max_half_angle = flakes.iter().map(|f| (f.radius / f.range).min(1.0).asin()).fold(0.0, f32::max);
-    FlakeSet { flakes, max_half_angle }
+    let max_half_angle = flakes
+        .iter()
+        .map(|f| (f.radius / f.range).min(1.0).asin())
+        .fold(0.0, f32::max);
+    FlakeSet {
+        flakes,
+        max_half_angle,
+    }
 }
 
 fn xi(r: f64) -> f64 {
@@ -264,7 +277,9 @@ pub fn noise_floor(points: &Points, ground: &[bool], to255: f64) -> [f64; 3] {
         }
     }
     for col in 0..3 {
-        let piv = (col..3).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs())).unwrap_or(col);
+        let piv = (col..3)
+            .max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))
+            .unwrap_or(col);
         m.swap(col, piv);
         if m[col][col].abs() < 1e-12 {
             return [0.0; 3];
@@ -272,13 +287,18 @@ pub fn noise_floor(points: &Points, ground: &[bool], to255: f64) -> [f64; 3] {
         for r in 0..3 {
             if r != col {
                 let f = m[r][col] / m[col][col];
-                for c in col..4 {
-                    m[r][c] -= f * m[col][c];
+                let pivot_row = m[col];
+                for (v, p) in m[r].iter_mut().zip(pivot_row).skip(col) {
+                    *v -= f * p;
                 }
             }
         }
     }
-    [0.7 * m[0][3] / m[0][0], 0.7 * m[1][3] / m[1][1], 0.7 * m[2][3] / m[2][2]]
+    [
+        0.7 * m[0][3] / m[0][0],
+        0.7 * m[1][3] / m[1][1],
+        0.7 * m[2][3] / m[2][2],
+    ]
 }
 
 /// Intensity factor of a wet road at incidence angle `theta` (radians from the surface normal):
@@ -308,7 +328,9 @@ pub struct HahnerSnow {
 fn build(s: &LidarSetup, rr: f64, occ: f64, wet: bool, salt: u64) -> HahnerSnow {
     let beams = s.sensor.beams().max(1);
     let base = Rng::for_setup(s.seed, salt);
-    let sets = (0..beams).map(|b| flake_set(&mut base.fork(b as u64), rr, occ)).collect();
+    let sets = (0..beams)
+        .map(|b| flake_set(&mut base.fork(b as u64), rr, occ))
+        .collect();
     HahnerSnow {
         seed: s.seed,
         salt,
@@ -339,7 +361,10 @@ impl HahnerSnow {
 
 impl LidarPerturbation for HahnerSnow {
     fn needs(&self) -> Needs {
-        Needs { ring: true, ..Default::default() }
+        Needs {
+            ring: true,
+            ..Default::default()
+        }
     }
 
     fn plan(&self, points: &Points, frame: &LidarFrame<'_>, plan: &mut Plan) {
@@ -358,10 +383,15 @@ impl LidarPerturbation for HahnerSnow {
                 plan.keep(i);
                 continue;
             }
-            let mut inten = points.intensity.as_ref().map_or(127.5, |v| v[i] as f64 * to255);
+            let mut inten = points
+                .intensity
+                .as_ref()
+                .map_or(127.5, |v| v[i] as f64 * to255);
             let mut changed = false;
             if self.wet_ground && ground[i] {
-                let theta = ((p[0] * p[0] + p[1] * p[1]).sqrt() as f64).atan2(-p[2] as f64).abs();
+                let theta = ((p[0] * p[0] + p[1] * p[1]).sqrt() as f64)
+                    .atan2(-p[2] as f64)
+                    .abs();
                 inten *= wet_ground_factor(theta.min(std::f64::consts::FRAC_PI_2));
                 changed = true;
             }
@@ -371,7 +401,11 @@ impl LidarPerturbation for HahnerSnow {
             match beam(set, az, self.half_divergence, r0, inten) {
                 SnowOutcome::Flake { range, intensity } => {
                     let k = (range / r0) as f32;
-                    plan.emit(i, [p[0] * k, p[1] * k, p[2] * k], (intensity / to255) as f32);
+                    plan.emit(
+                        i,
+                        [p[0] * k, p[1] * k, p[2] * k],
+                        (intensity / to255) as f32,
+                    );
                 }
                 outcome => {
                     if let SnowOutcome::Dimmed(v) = outcome {
@@ -402,23 +436,42 @@ mod tests {
         let mut rng = Rng::for_setup(1, 1);
         for (rr, occ) in [HAHNER_SNOW[0], HAHNER_SNOW[4]] {
             let set = flake_set(&mut rng, rr, occ);
-            let area: f64 = set.flakes.iter().map(|f| std::f64::consts::PI * (f.radius as f64).powi(2)).sum();
+            let area: f64 = set
+                .flakes
+                .iter()
+                .map(|f| std::f64::consts::PI * (f.radius as f64).powi(2))
+                .sum();
             let want = occ * std::f64::consts::PI * R0 * R0;
             assert!(area >= want && area < want * 1.05, "{area} vs {want}");
             assert!(set.flakes.windows(2).all(|w| w[0].azimuth <= w[1].azimuth));
-            assert!(set.flakes.iter().all(|f| f.range > f.radius && f.range <= R0 as f32));
+            assert!(
+                set.flakes
+                    .iter()
+                    .all(|f| f.range > f.radius && f.range <= R0 as f32)
+            );
         }
         // lidar.md: about 3.8e4 disks per beam at the lightest setting; fewer for heavy snow
         // (larger flakes).
-        let light = flake_set(&mut rng, HAHNER_SNOW[0].0, HAHNER_SNOW[0].1).flakes.len();
+        let light = flake_set(&mut rng, HAHNER_SNOW[0].0, HAHNER_SNOW[0].1)
+            .flakes
+            .len();
         assert!((30_000..48_000).contains(&light), "{light}");
-        assert!(flake_set(&mut rng, HAHNER_SNOW[4].0, HAHNER_SNOW[4].1).flakes.len() < light);
+        assert!(
+            flake_set(&mut rng, HAHNER_SNOW[4].0, HAHNER_SNOW[4].1)
+                .flakes
+                .len()
+                < light
+        );
     }
 
     #[test]
     fn a_flake_in_front_of_a_dark_far_target_wins() {
         let set = FlakeSet {
-            flakes: vec![Flake { azimuth: 0.0, range: 5.0, radius: 0.004 }],
+            flakes: vec![Flake {
+                azimuth: 0.0,
+                range: 5.0,
+                radius: 0.004,
+            }],
             max_half_angle: (0.004f32 / 5.0).asin(),
         };
         // A 3 mrad wedge at 5 m is 15 mm wide: the flake covers about half of it.
@@ -431,7 +484,11 @@ mod tests {
             SnowOutcome::Dimmed(v) => assert!(v < 250.0 && v > 50.0, "{v}"),
             o => panic!("{o:?}"),
         }
-        assert_eq!(beam(&set, 1.0, 1.5e-3, 40.0, 10.0), SnowOutcome::Clear, "no flake in another direction");
+        assert_eq!(
+            beam(&set, 1.0, 1.5e-3, 40.0, 10.0),
+            SnowOutcome::Clear,
+            "no flake in another direction"
+        );
     }
 
     #[test]

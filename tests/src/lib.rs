@@ -1,0 +1,309 @@
+//! # perturb-tests
+//!
+//! Helpers for the end-to-end tests in `tests/tests/`: every test runs real processes (the test
+//! itself as the publisher, `perturbd`, the `perturb-test-sink` subscriber, `perturb ctl`) in an
+//! iceoryx2 namespace of its own, so tests neither see each other nor other users of the machine.
+//!
+//! The binaries of the other crates are found next to the test executable's target directory;
+//! build them first (`cargo build --workspace --bins`, the README's test command does).
+
+#![warn(missing_docs)]
+
+use perturb_wire::{FrameHeader, TransportOptions};
+use serde::{Deserialize, Serialize};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// What the sink records of each frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    /// Sequence number.
+    pub seq: u64,
+    /// ROS stamp (sec, nanosec).
+    pub stamp: (i32, u32),
+    /// `frame_id`.
+    pub frame_id: String,
+    /// Image width or points per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Image encoding (empty for clouds).
+    pub encoding: String,
+    /// Applied perturbation ID, severity and seed.
+    pub applied: Option<(String, u8, u64)>,
+    /// Valid payload bytes.
+    pub data_len: u64,
+    /// Hop timestamps (ingress, daemon rx, daemon tx), CLOCK_MONOTONIC ns.
+    pub hops: (u64, u64, u64),
+}
+
+impl FrameRecord {
+    /// The record of a received header.
+    pub fn from_header(h: &FrameHeader) -> Self {
+        FrameRecord {
+            seq: h.seq,
+            stamp: (h.stamp_sec, h.stamp_nanosec),
+            frame_id: h.frame_id().unwrap_or("").to_string(),
+            width: h.width,
+            height: h.height,
+            encoding: h.encoding().unwrap_or("").to_string(),
+            applied: h.applied().map(|a| (a.id.to_string(), a.severity, a.seed)),
+            data_len: h.data_len,
+            hops: (h.t_ingress_ns, h.t_daemon_rx_ns, h.t_daemon_tx_ns),
+        }
+    }
+}
+
+/// A binary of the workspace, next to the test executable's target directory.
+pub fn exe(name: &str) -> PathBuf {
+    let me = std::env::current_exe().expect("the test executable's path");
+    // target/<profile>/deps/<test> -> target/<profile>/<name>
+    let dir = me
+        .parent()
+        .and_then(|d| d.parent())
+        .expect("the target directory");
+    let p = dir.join(name);
+    assert!(
+        p.exists(),
+        "{} is missing: build the binaries first (cargo build --workspace --bins)",
+        p.display()
+    );
+    p
+}
+
+/// The workspace's root folder.
+pub fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("workspace root")
+        .to_path_buf()
+}
+
+/// A private iceoryx2 namespace and scratch folder for one test; both are removed on drop.
+pub struct Namespace {
+    /// The transport options every process of the test uses.
+    pub options: TransportOptions,
+    /// A scratch folder for this test.
+    pub dir: PathBuf,
+}
+
+impl Namespace {
+    /// A namespace named after `tag` (and this process).
+    pub fn new(tag: &str) -> Self {
+        let options = TransportOptions::isolated(tag);
+        let dir = std::env::temp_dir().join(format!("perturb-e2e-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("scratch folder");
+        Namespace { options, dir }
+    }
+
+    /// A command with the namespace's environment.
+    pub fn command(&self, program: impl AsRef<std::ffi::OsStr>) -> Command {
+        let mut c = Command::new(program);
+        for (k, v) in self.options.to_env() {
+            c.env(k, v);
+        }
+        c
+    }
+
+    /// Runs `perturb ctl ARGS` and returns its output.
+    pub fn ctl(&self, args: &[&str]) -> Output {
+        self.command(exe("perturb"))
+            .arg("ctl")
+            .args(args)
+            .output()
+            .expect("running perturb ctl")
+    }
+
+    /// `perturb ctl stats --json`, parsed.
+    pub fn stats(&self) -> serde_json::Value {
+        let out = self.ctl(&["stats", "--json"]);
+        assert!(
+            out.status.success(),
+            "perturb ctl stats failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).expect("stats JSON")
+    }
+
+    /// Starts `perturbd --config CONFIG` and waits until it answers `perturb ctl status`.
+    pub fn start_daemon(&self, config: &Path) -> Daemon {
+        let report = self.dir.join("perturbd-report.json");
+        let log = std::fs::File::create(self.dir.join("perturbd.log")).expect("daemon log");
+        let child = self
+            .command(exe("perturbd"))
+            .arg("--config")
+            .arg(config)
+            .arg("--report")
+            .arg(&report)
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("starting perturbd");
+        let mut d = Daemon {
+            child: Some(child),
+            log: self.dir.join("perturbd.log"),
+            report,
+        };
+        let start = Instant::now();
+        loop {
+            if self.ctl(&["status", "--timeout", "0.5"]).status.success() {
+                return d;
+            }
+            if let Some(st) = d.child.as_mut().and_then(|c| c.try_wait().ok().flatten()) {
+                panic!("perturbd exited ({st}) at start:\n{}", d.log_text());
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(30),
+                "perturbd did not answer within 30 s:\n{}",
+                d.log_text()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Starts a sink on `stream` of `config` writing to `out`; returns once it is subscribed.
+    pub fn start_sink(&self, config: &Path, stream: &str, out: &Path, extra: &[&str]) -> Sink {
+        let mut child = self
+            .command(exe("perturb-test-sink"))
+            .arg("--config")
+            .arg(config)
+            .arg("--stream")
+            .arg(stream)
+            .arg("--out")
+            .arg(out)
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("starting the sink");
+        let stdout = child.stdout.take().expect("sink stdout");
+        let mut line = String::new();
+        BufReader::new(stdout)
+            .read_line(&mut line)
+            .expect("sink output");
+        assert_eq!(line.trim(), "ready", "the sink did not start");
+        Sink {
+            child,
+            out: out.to_path_buf(),
+        }
+    }
+}
+
+impl Drop for Namespace {
+    fn drop(&mut self) {
+        let _ = self.options.remove_namespace_files();
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+/// A running `perturbd`; interrupted (SIGINT) on drop.
+pub struct Daemon {
+    child: Option<Child>,
+    /// Its stderr log.
+    pub log: PathBuf,
+    /// Where it writes its JSON report on exit.
+    pub report: PathBuf,
+}
+
+impl Daemon {
+    /// The log so far.
+    pub fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Kills it with SIGKILL (no cleanup, as a crash).
+    pub fn kill9(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    /// Stops it with SIGINT and waits; returns its parsed report.
+    pub fn stop(&mut self) -> serde_json::Value {
+        if let Some(mut c) = self.child.take() {
+            interrupt(&mut c);
+        }
+        let text = std::fs::read_to_string(&self.report)
+            .unwrap_or_else(|e| panic!("no daemon report ({e}):\n{}", self.log_text()));
+        serde_json::from_str(&text).expect("report JSON")
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            interrupt(&mut c);
+        }
+    }
+}
+
+/// SIGINT, then SIGKILL after 10 s.
+fn interrupt(c: &mut Child) {
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe {
+        libc::kill(c.id() as i32, libc::SIGINT);
+    }
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(10) {
+        if let Ok(Some(_)) = c.try_wait() {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = c.kill();
+    let _ = c.wait();
+}
+
+/// A running sink.
+pub struct Sink {
+    child: Child,
+    /// Its output folder.
+    pub out: PathBuf,
+}
+
+impl Sink {
+    /// Waits for the sink to stop (idle timeout or frame limit) and returns its records.
+    pub fn finish(mut self) -> Vec<FrameRecord> {
+        let st = self.child.wait().expect("waiting for the sink");
+        assert!(st.success(), "the sink failed: {st}");
+        self.records()
+    }
+
+    /// The records written so far.
+    pub fn records(&self) -> Vec<FrameRecord> {
+        let text = std::fs::read_to_string(self.out.join("frames.jsonl")).unwrap_or_default();
+        text.lines()
+            .map(|l| serde_json::from_str(l).expect("a frame record"))
+            .collect()
+    }
+
+    /// The payload of frame `seq`.
+    pub fn payload(&self, seq: u64) -> Vec<u8> {
+        std::fs::read(self.out.join(format!("{seq}.bin"))).expect("a recorded payload")
+    }
+
+    /// Waits until `n` records are written or `timeout` passes; returns the records.
+    pub fn wait_for(&self, n: usize, timeout: Duration) -> Vec<FrameRecord> {
+        let start = Instant::now();
+        loop {
+            let r = self.records();
+            if r.len() >= n || start.elapsed() > timeout {
+                return r;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Sink {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
