@@ -4,6 +4,8 @@
 //! [bridge]
 //! name = "vehicle"            # ROS node name, log prefix
 //! bus = "iceoryx2"            # or "local": in-process passthrough, no daemon
+//! iox2 = { prefix = "iox2_" }  # iceoryx2 namespace shared with perturbd (PERTURB_IOX2_* override)
+//! qos = { subscriber_buffer = 4 }   # iceoryx2 QoS, compatible with the daemon's streams
 //!
 //! [dds]
 //! backend = "rustdds"         # or "cyclone"
@@ -74,6 +76,12 @@ pub struct BridgeSection {
     pub bus: BusKind,
     /// Where the end-of-run report (JSON) is written, if anywhere.
     pub report: Option<PathBuf>,
+    /// The iceoryx2 namespace (prefix, root, config file) shared with `perturbd`; the
+    /// `PERTURB_IOX2_*` environment variables take precedence.
+    pub iox2: perturb_wire::TransportOptions,
+    /// QoS of the iceoryx2 services the bridge opens: must be compatible with the daemon's
+    /// `qos` for the same streams (the service is created with the first opener's values).
+    pub qos: perturb_wire::StreamQos,
 }
 
 impl Default for BridgeSection {
@@ -82,6 +90,8 @@ impl Default for BridgeSection {
             name: "perturb_bridge".into(),
             bus: BusKind::default(),
             report: None,
+            iox2: perturb_wire::TransportOptions::default(),
+            qos: perturb_wire::StreamQos::default(),
         }
     }
 }

@@ -241,7 +241,7 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
 pub fn make_bus(cfg: &Config) -> Result<Arc<dyn Bus>> {
     match cfg.bridge.bus {
         BusKind::Local => Ok(Arc::new(crate::bus::SharedLocalBus::default())),
-        BusKind::Iceoryx2 => crate::iox::bus(&cfg.bridge.name),
+        BusKind::Iceoryx2 => crate::iox::bus(&cfg.bridge),
     }
 }
 
