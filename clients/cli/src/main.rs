@@ -10,6 +10,7 @@ mod bench;
 mod ctl;
 mod dataset;
 mod demo;
+mod demo_offline;
 mod files;
 mod gallery;
 mod info;

@@ -592,6 +592,7 @@ fn demo_writes_outputs() {
     let d = tmp("demo");
     let out = ok(&[
         "demo",
+        "--offline",
         "--out",
         d.to_str().unwrap(),
         "--width",
