@@ -59,11 +59,11 @@ impl FrameRecord {
 /// A binary of the workspace, next to the test executable's target directory.
 pub fn exe(name: &str) -> PathBuf {
     let me = std::env::current_exe().expect("the test executable's path");
-    // target/<profile>/deps/<test> -> target/<profile>/<name>
-    let dir = me
-        .parent()
-        .and_then(|d| d.parent())
-        .expect("the target directory");
+    // target/<profile>/deps/<test> or target/<profile>/<bin> -> target/<profile>/<name>
+    let mut dir = me.parent().expect("the target directory");
+    if dir.ends_with("deps") {
+        dir = dir.parent().expect("the target directory");
+    }
     let p = dir.join(name);
     assert!(
         p.exists(),
@@ -211,6 +211,11 @@ pub struct Daemon {
 }
 
 impl Daemon {
+    /// Its process id, while it runs.
+    pub fn pid(&self) -> Option<u32> {
+        self.child.as_ref().map(|c| c.id())
+    }
+
     /// The log so far.
     pub fn log_text(&self) -> String {
         std::fs::read_to_string(&self.log).unwrap_or_default()
