@@ -11,7 +11,17 @@ fn the_demo_runs_the_pipeline_and_leaves_a_readable_recording_with_switching_per
     let out = std::env::temp_dir().join(format!("perturb-demo-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let o = Command::new(exe("perturb"))
-        .args(["demo", "--seconds", "5", "--switch-every", "2", "--width", "320", "--height", "200"])
+        .args([
+            "demo",
+            "--seconds",
+            "5",
+            "--switch-every",
+            "2",
+            "--width",
+            "320",
+            "--height",
+            "200",
+        ])
         .arg("--out")
         .arg(&out)
         .output()
@@ -22,14 +32,25 @@ fn the_demo_runs_the_pipeline_and_leaves_a_readable_recording_with_switching_per
         "demo failed:\n{stdout}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    for col in ["source->daemon", "perturb", "daemon->sink", "camera_front", "lidar_top"] {
+    for col in [
+        "source->daemon",
+        "perturb",
+        "daemon->sink",
+        "camera_front",
+        "lidar_top",
+    ] {
         assert!(stdout.contains(col), "the table lacks {col}:\n{stdout}");
     }
     let recording = std::fs::read_dir(&out)
         .unwrap()
         .flatten()
         .map(|e| e.path())
-        .find(|p| p.file_name().unwrap().to_string_lossy().starts_with("recording-"))
+        .find(|p| {
+            p.file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("recording-")
+        })
         .expect("a recording");
     assert!(stdout.contains(&recording.display().to_string()));
 
@@ -68,6 +89,46 @@ fn the_demo_runs_the_pipeline_and_leaves_a_readable_recording_with_switching_per
             Some(e["id"].as_str()?.to_string())
         })
         .collect();
-    assert!(ids.len() >= 4, "the demo did not switch perturbations: {ids:?}");
+    assert!(
+        ids.len() >= 4,
+        "the demo did not switch perturbations: {ids:?}"
+    );
     let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn the_hil_feasibility_sweep_times_every_severity_in_the_live_pipeline() {
+    let bag = workspace().join("../shared/data/ros2_mcap_kitti_000001");
+    if !bag.exists() {
+        eprintln!("SKIP: {} is absent", bag.display());
+        return;
+    }
+    let o = Command::new(exe("perturb"))
+        .args([
+            "bench",
+            "--modality",
+            "lidar",
+            "--sensor",
+            "hdl64e",
+            "--json",
+        ])
+        .args(["--window", "1", "--id", "L-B1", "--hil"])
+        .arg(&bag)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows: Vec<Value> = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(rows.len(), 3, "one row per severity: {rows:?}");
+    for (i, r) in rows.iter().enumerate() {
+        assert_eq!(r["id"], "L-B1");
+        assert_eq!(r["severity"], i as u64 + 1);
+        assert!(r["frames"].as_u64().unwrap() >= 3, "{r}");
+        let (mean, max) = (
+            r["mean_ms"].as_f64().unwrap(),
+            r["max_ms"].as_f64().unwrap(),
+        );
+        assert!(mean > 0.0 && mean <= max, "{r}");
+        assert!(r["node_overhead_ms"].as_f64().unwrap() > 0.0, "{r}");
+        assert_eq!(r["fits_budget"], max <= 200.0);
+    }
 }

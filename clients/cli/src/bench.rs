@@ -27,9 +27,16 @@ pub enum Format {
   perturb bench --modality camera                       # KITTI frame scaled to 1920x1208, one thread
   perturb bench --modality camera --width 800 --height 503 --json
   perturb bench --modality lidar --input scan.bin --threads 2
+  perturb bench --modality camera --hil drive.mcap --window 10 --format markdown
 
 Without --input the real KITTI frame or scan in ../shared/data is used. Times are per frame,
-after a warm-up frame; setup (tables, textures, particle sets) is reported separately.")]
+after a warm-up frame; setup (tables, textures, particle sets) is reported separately.
+
+With --hil BAG the table is measured in the live pipeline instead: the bag is replayed (looped,
+original timing) through perturb-bridge and perturbd (started as child processes, which must
+be next to perturb), each perturbation and severity is active for --window seconds, and each
+frame is timed from ingress publish to daemon publish (what the budget applies to). A first
+window with everything off gives the middleware (node) overhead.")]
 pub struct Args {
     /// camera or lidar.
     #[arg(long)]
@@ -61,6 +68,13 @@ pub struct Args {
     /// Full-scale intensity of the cloud, 1 or 255.
     #[arg(long)]
     intensity_max: Option<f32>,
+    /// Measure in the live pipeline: replay this rosbag2 MCAP bag through perturb-bridge and
+    /// perturbd and sweep the perturbations (hardware-in-the-loop feasibility).
+    #[arg(long)]
+    hil: Option<PathBuf>,
+    /// Seconds each perturbation and severity is active in --hil mode (the paper used 10).
+    #[arg(long, default_value_t = 10.0)]
+    window: f64,
     /// Print JSON (shorthand for --format json).
     #[arg(long)]
     json: bool,
@@ -75,6 +89,18 @@ struct Row<'a> {
     timing: &'a Timing,
     budget_ms: f64,
     fits_budget: bool,
+    /// --hil: mean latency with every perturbation off (the middleware alone).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    node_overhead_ms: Option<f64>,
+    /// --hil: frames the daemon dropped during the window.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dropped: Option<u64>,
+}
+
+/// What only --hil measures.
+struct Live<'a> {
+    overhead_ms: f64,
+    dropped: &'a [u64],
 }
 
 fn default_input(modality: Modality) -> Result<PathBuf> {
@@ -95,10 +121,6 @@ fn default_input(modality: Modality) -> Result<PathBuf> {
 
 /// Runs the benchmark and prints the report.
 pub fn run(a: Args) -> Result<()> {
-    let input = match &a.input {
-        Some(p) => p.clone(),
-        None => default_input(a.modality)?,
-    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.max(1))
         .build()?;
@@ -107,6 +129,26 @@ pub fn run(a: Args) -> Result<()> {
         Modality::Lidar => 200.0,
     });
     let selected = |id: &str| a.ids.is_empty() || a.ids.iter().any(|i| i.eq_ignore_ascii_case(id));
+    let format = if a.json { Format::Json } else { a.format };
+    if let Some(bag) = &a.hil {
+        let entries: Vec<_> = of_modality(a.modality)
+            .filter(|e| e.is_implemented() && selected(e.id))
+            .collect();
+        if entries.is_empty() {
+            bail!("no perturbation selected");
+        }
+        let sensor = a.sensor.as_deref().unwrap_or("vlp32c");
+        let r = crate::hil::sweep(bag, a.modality, &entries, a.window, sensor)?;
+        let live = Live {
+            overhead_ms: r.overhead_ms,
+            dropped: &r.dropped,
+        };
+        return print_report(&r.rows, budget, format, Some(&live));
+    }
+    let input = match &a.input {
+        Some(p) => p.clone(),
+        None => default_input(a.modality)?,
+    };
     let mut rows: Vec<Timing> = Vec::new();
     match (a.modality, load(&input)?) {
         (Modality::Camera, Loaded::Image(img, _)) => {
@@ -159,29 +201,46 @@ pub fn run(a: Args) -> Result<()> {
             }
         ),
     }
-    print_report(&rows, budget, if a.json { Format::Json } else { a.format })
+    print_report(&rows, budget, format, None)
 }
 
-fn print_report(rows: &[Timing], budget: f64, format: Format) -> Result<()> {
+fn print_report(rows: &[Timing], budget: f64, format: Format, live: Option<&Live>) -> Result<()> {
     match format {
         Format::Json => {
             let out: Vec<Row<'_>> = rows
                 .iter()
-                .map(|t| Row {
+                .enumerate()
+                .map(|(i, t)| Row {
                     timing: t,
                     budget_ms: budget,
                     fits_budget: t.max_ms <= budget,
+                    node_overhead_ms: live.map(|l| l.overhead_ms),
+                    dropped: live.and_then(|l| l.dropped.get(i).copied()),
                 })
                 .collect();
             println!("{}", serde_json::to_string_pretty(&out)?);
         }
         Format::Csv => {
             println!(
-                "id,name,severity,frames,setup_ms,mean_ms,median_ms,p99_ms,max_ms,budget_ms,fits_budget"
+                "id,name,severity,frames,setup_ms,mean_ms,median_ms,p99_ms,max_ms,budget_ms,fits_budget{}",
+                if live.is_some() {
+                    ",node_overhead_ms,dropped"
+                } else {
+                    ""
+                }
             );
-            for t in rows {
+            for (i, t) in rows.iter().enumerate() {
+                let extra = live
+                    .map(|l| {
+                        format!(
+                            ",{:.3},{}",
+                            l.overhead_ms,
+                            l.dropped.get(i).copied().unwrap_or(0)
+                        )
+                    })
+                    .unwrap_or_default();
                 println!(
-                    "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{}",
+                    "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{}{extra}",
                     t.id,
                     t.name,
                     t.severity,
@@ -198,6 +257,15 @@ fn print_report(rows: &[Timing], budget: f64, format: Format) -> Result<()> {
         }
         Format::Table | Format::Markdown => {
             let md = format == Format::Markdown;
+            if let Some(l) = live {
+                println!(
+                    "live pipeline (bag replay -> perturbd): latency = ingress publish -> daemon publish; \
+                     middleware (node) overhead with every perturbation off: {:.3} ms mean; frames dropped by the daemon: {}{}",
+                    l.overhead_ms,
+                    l.dropped.iter().sum::<u64>(),
+                    if md { "\n" } else { "" }
+                );
+            }
             let mut ids: Vec<&'static str> = rows.iter().map(|t| t.id).collect();
             ids.dedup();
             if md {

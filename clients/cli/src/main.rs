@@ -13,9 +13,11 @@ mod demo;
 mod demo_offline;
 mod files;
 mod gallery;
+mod hil;
 mod info;
 mod list;
 mod metrics;
+mod pipeline;
 
 use clap::{Parser, Subcommand};
 

@@ -138,8 +138,16 @@ fn overhead(frames: u64, hz: f64) -> Result<()> {
     };
     let mut daemon = ns.start_daemon(&cfg);
     let payloads = [
-        ("800x503 rgb8", "cam", Frame::Image(synthetic::street_image(800, 503, 0))),
-        ("1920x1208 rgb8", "cam", Frame::Image(synthetic::street_image(1920, 1208, 0))),
+        (
+            "800x503 rgb8",
+            "cam",
+            Frame::Image(synthetic::street_image(800, 503, 0)),
+        ),
+        (
+            "1920x1208 rgb8",
+            "cam",
+            Frame::Image(synthetic::street_image(1920, 1208, 0)),
+        ),
         ("KITTI cloud", "lidar", Frame::Cloud(kitti_cloud())),
     ];
     let t_pub = Transport::open("bench_pub", &ns.options)?;
@@ -149,7 +157,12 @@ fn overhead(frames: u64, hz: f64) -> Result<()> {
     );
     println!(
         "{:<28} {:>10} | {:>22} | {:>22} | {:>22} | {:>22}",
-        "payload", "bytes", "publish->daemon rx", "daemon rx->tx", "daemon tx->subscriber", "end to end"
+        "payload",
+        "bytes",
+        "publish->daemon rx",
+        "daemon rx->tx",
+        "daemon tx->subscriber",
+        "end to end"
     );
     let mut seq = 0u64;
     for (label, stream, frame) in &payloads {
@@ -171,11 +184,11 @@ fn overhead(frames: u64, hz: f64) -> Result<()> {
             };
             let mut got = None;
             while start.elapsed() < Duration::from_secs(2) {
-                if let Some(f) = sub.wait(Duration::from_millis(500))? {
-                    if f.header().seq == seq {
-                        got = Some((*f.header(), monotonic_ns()));
-                        break;
-                    }
+                if let Some(f) = sub.wait(Duration::from_millis(500))?
+                    && f.header().seq == seq
+                {
+                    got = Some((*f.header(), monotonic_ns()));
+                    break;
                 }
             }
             seq += 1;
@@ -234,10 +247,9 @@ fn load(seconds: f64, config: Option<PathBuf>) -> Result<()> {
     let published = Arc::new(AtomicU64::new(0));
     for s in &cfg.streams {
         let (frame, hz) = match s.modality {
-            perturb_core::registry::Modality::Camera => (
-                Frame::Image(synthetic::street_image(800, 503, 0)),
-                30.0,
-            ),
+            perturb_core::registry::Modality::Camera => {
+                (Frame::Image(synthetic::street_image(800, 503, 0)), 30.0)
+            }
             perturb_core::registry::Modality::Lidar => (Frame::Cloud(kitti_cloud()), 10.0),
         };
         let (opts, stop, received, published) = (
@@ -296,7 +308,8 @@ fn load(seconds: f64, config: Option<PathBuf>) -> Result<()> {
     let wall = t0.elapsed().as_secs_f64();
     stop.store(true, Ordering::Relaxed);
     for t in threads {
-        t.join().map_err(|_| anyhow::anyhow!("a publisher panicked"))??;
+        t.join()
+            .map_err(|_| anyhow::anyhow!("a publisher panicked"))??;
     }
     let report = daemon.stop();
     println!(
@@ -306,7 +319,15 @@ fn load(seconds: f64, config: Option<PathBuf>) -> Result<()> {
     );
     println!(
         "{:<10} {:>7} {:>7} {:>7} {:>7} {:>8} {:>7} | {:>20} {:>20}",
-        "stream", "in", "out", "dropped", "invalid", "overbudg", "active", "perturb p50/p99 ms", "in->out p50/p99 ms"
+        "stream",
+        "in",
+        "out",
+        "dropped",
+        "invalid",
+        "overbudg",
+        "active",
+        "perturb p50/p99 ms",
+        "in->out p50/p99 ms"
     );
     let (mut drops, mut outs) = (0, 0);
     for s in report["streams"].as_array().into_iter().flatten() {
@@ -323,7 +344,11 @@ fn load(seconds: f64, config: Option<PathBuf>) -> Result<()> {
             s["invalid"],
             s["over_budget"],
             s["id"].as_str().unwrap_or("off"),
-            format!("{:.2} / {:.2}", g("perturb", "p50_us"), g("perturb", "p99_us")),
+            format!(
+                "{:.2} / {:.2}",
+                g("perturb", "p50_us"),
+                g("perturb", "p99_us")
+            ),
             format!(
                 "{:.2} / {:.2}",
                 g("ingress_to_tx", "p50_us"),
