@@ -312,3 +312,49 @@ impl Drop for Sink {
         let _ = self.child.wait();
     }
 }
+
+/// True if the python package `rosbags` (the independent bag reader) can be imported. When it
+/// cannot, the test is skipped with a message, or fails if `PERTURB_REQUIRE_ORACLES=1` (CI).
+pub fn have_rosbags() -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", "import rosbags"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(
+            std::env::var("PERTURB_REQUIRE_ORACLES").ok().as_deref() != Some("1"),
+            "rosbags is missing and PERTURB_REQUIRE_ORACLES=1"
+        );
+        eprintln!("SKIP: the python package rosbags is missing (pip install rosbags)");
+    }
+    ok
+}
+
+/// Every message of a bag as read by `rosbags` (`bridge/tests/read_bag.py`): topic, type, log
+/// time, header stamp and frame_id, geometry, sha256 of the data, or the string.
+pub fn read_bag(bag: &Path) -> Vec<serde_json::Value> {
+    let o = Command::new("python3")
+        .arg(workspace().join("bridge/tests/read_bag.py"))
+        .arg(bag)
+        .output()
+        .expect("running python3");
+    assert!(
+        o.status.success(),
+        "rosbags could not read {}: {}",
+        bag.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .skip(1)
+        .map(|l| serde_json::from_str(l).expect("a JSON line"))
+        .collect()
+}
+
+/// The `/perturb/events` records of a bag read by [`read_bag`].
+pub fn events(msgs: &[serde_json::Value]) -> Vec<serde_json::Value> {
+    msgs.iter()
+        .filter(|m| m["topic"] == "/perturb/events")
+        .filter_map(|m| serde_json::from_str(m["string"].as_str()?).ok())
+        .collect()
+}

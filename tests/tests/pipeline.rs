@@ -2,52 +2,11 @@
 //! iceoryx2 -> `perturbd` -> iceoryx2 -> `perturb-bridge` recorder -> rosbag2 MCAP, read back by
 //! the independent `rosbags` package.
 
-use perturb_tests::{Namespace, exe, workspace};
+use perturb_tests::{Namespace, events, exe, have_rosbags, read_bag, workspace};
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
-
-fn required() -> bool {
-    std::env::var("PERTURB_REQUIRE_ORACLES").is_ok_and(|v| v == "1")
-}
-
-/// True if `rosbags` can be imported; fails instead of skipping when oracles are required.
-fn have_rosbags() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import rosbags"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            !required(),
-            "rosbags is missing and PERTURB_REQUIRE_ORACLES=1"
-        );
-        eprintln!("SKIP: the python package rosbags is missing (pip install rosbags)");
-    }
-    ok
-}
-
-/// Every message of a bag, as `bridge/tests/read_bag.py` prints them (rosbags).
-fn read_bag(bag: &Path) -> Vec<Value> {
-    let o = Command::new("python3")
-        .arg(workspace().join("bridge/tests/read_bag.py"))
-        .arg(bag)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "rosbags could not read {}: {}",
-        bag.display(),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout)
-        .lines()
-        .skip(1)
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
-}
 
 fn run_bridge(ns: &Namespace, config: &Path) {
     let o = ns
@@ -62,13 +21,6 @@ fn run_bridge(ns: &Namespace, config: &Path) {
         "perturb-bridge failed: {}",
         String::from_utf8_lossy(&o.stderr)
     );
-}
-
-fn events(msgs: &[Value]) -> Vec<Value> {
-    msgs.iter()
-        .filter(|m| m["topic"] == "/perturb/events")
-        .map(|m| serde_json::from_str(m["string"].as_str().unwrap()).unwrap())
-        .collect()
 }
 
 fn kitti_bag() -> Option<PathBuf> {
