@@ -226,6 +226,7 @@ fn receive_loop(
     let name = rt.config.name.as_str();
     let c = &rt.stats.counters;
     let mut gaps = GapTracker::default();
+    let mut layouts = LayoutCache::default();
     while !shutdown.load(Ordering::Relaxed) {
         let mut broken = false;
         {
@@ -278,6 +279,12 @@ fn receive_loop(
                                     }
                                 }
                                 c.last_seq_plus_one.store(h.seq + 1, Ordering::Relaxed);
+                            }
+                            // An invalid frame is counted and released here, so it never takes
+                            // a good frame's place in the queue.
+                            if let Err(e) = check(rt.config.modality, &frame, &mut layouts) {
+                                invalid(rt, frame.header().seq, &e);
+                                continue;
                             }
                             enqueue(rt, &tx, &evict, Item { frame, t_rx });
                         }
@@ -367,6 +374,15 @@ fn process_loop(
         process_one(rt, &mut publisher, item, &mut active, &mut cache);
     }
     debug!(stream = name, "processor stopped");
+}
+
+/// Checks a received frame is one the stream can process: header and payload agree, the
+/// modality is the stream's, the image encoding is supported or the point layout is readable.
+fn check(modality: Modality, frame: &Frame, layouts: &mut LayoutCache) -> Result<(), WireError> {
+    match modality {
+        Modality::Camera => frame.image().map(|_| ()),
+        Modality::Lidar => frame.cloud_cached(layouts).map(|_| ()),
+    }
 }
 
 fn invalid(rt: &StreamRuntime, seq: u64, e: &WireError) {
