@@ -338,11 +338,11 @@ fn load(seconds: f64, config: Option<PathBuf>) -> Result<()> {
         println!(
             "{:<10} {:>7} {:>7} {:>7} {:>7} {:>8} {:>7} | {:>20} {:>20}",
             s["name"].as_str().unwrap_or("?"),
-            s["frames_in"],
-            s["frames_out"],
-            s["dropped"],
-            s["invalid"],
-            s["over_budget"],
+            s["frames_in"].as_u64().unwrap_or(0),
+            s["frames_out"].as_u64().unwrap_or(0),
+            s["dropped"].as_u64().unwrap_or(0),
+            s["invalid"].as_u64().unwrap_or(0),
+            s["over_budget"].as_u64().unwrap_or(0),
             s["id"].as_str().unwrap_or("off"),
             format!(
                 "{:.2} / {:.2}",
