@@ -404,6 +404,19 @@ fn metrics_lidar_errors_are_clear() {
         "--quiet",
     ]);
     assert!(err.contains("no finished LiDAR set"), "{err}");
+    // --id keeps only the sets of those perturbations.
+    let err = fails(&[
+        "metrics",
+        "lidar",
+        "--clean",
+        s(&clean),
+        "--perturbed",
+        s(&root),
+        "--id",
+        "beam_reduction",
+        "--quiet",
+    ]);
+    assert!(err.contains("no finished LiDAR set"), "{err}");
 }
 
 fn floats(v: &serde_json::Value) -> Vec<f32> {
