@@ -75,6 +75,7 @@ pub fn run(a: Args) -> Result<()> {
         intensity_max: a.intensity_max,
         topic: vec![],
         quiet: true,
+        lidar_metrics: false,
     };
     let sets = select(&sel, &[modality])?;
     let sensor = if modality == Modality::Lidar {

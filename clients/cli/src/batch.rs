@@ -15,14 +15,18 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Args)]
 #[command(after_help = "Examples:
   perturb batch images/ --out perturbed/ --family blur          # every blur at severities 1..5
-  perturb batch scans/ --out perturbed/ --modality lidar --metrics
+  perturb batch scans/ --out perturbed/ --modality lidar --lidar-metrics
   perturb batch drive.mcap --out perturbed/ --id C-C7 --id L-A9 --severity 1 --severity 3
 
 Output: OUT/<ID>_<name>/s<N>/ holds the perturbed copy of the dataset (same file names and
 formats; a bag for a bag). The frame sequence number is the file's index in sorted order (for
 bags: the message's index on its topic), so every output can be reproduced with `perturb apply`.
 An interrupted run resumes where it stopped: finished sets carry a .done marker and are skipped,
-finished files are kept. OUT/batch.json records what was run.")]
+finished files are kept. OUT/batch.json records what was run.
+
+--lidar-metrics then runs the detector on the clean and the perturbed clouds of this run's LiDAR
+sets and writes the RQ1 table (retention, ATE; see `perturb metrics lidar --help`) to
+OUT/lidar_metrics.md and OUT/lidar_metrics.json, and prints it.")]
 pub struct Args {
     /// A folder of images, a folder of point clouds (KITTI .bin, .pcd, .pcd.bin), or a bag.
     pub input: PathBuf,
@@ -59,6 +63,10 @@ pub struct Args {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Afterwards, compute the LiDAR detection metrics (retention, ATE) of the LiDAR sets and
+    /// write them to OUT/lidar_metrics.md and OUT/lidar_metrics.json.
+    #[arg(long, visible_alias = "metrics")]
+    pub lidar_metrics: bool,
 }
 
 /// One (perturbation, severity) output set.
@@ -278,6 +286,50 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     eprintln!("{} sets written under {}", sets.len(), args.out.display());
+    if args.lidar_metrics {
+        lidar_metrics(&args, &sets, &pool)?;
+    }
+    Ok(())
+}
+
+/// `--lidar-metrics`: the RQ1 table of this run's LiDAR sets, into OUT.
+fn lidar_metrics(args: &Args, sets: &[Set], pool: &rayon::ThreadPool) -> Result<()> {
+    use crate::lidar_eval::{EvalConfig, Format, SetDir, evaluate, render};
+    let lidar: Vec<SetDir> = sets
+        .iter()
+        .filter(|s| s.entry.modality == Modality::Lidar)
+        .map(|s| SetDir {
+            entry: s.entry,
+            severity: s.severity,
+            dir: s.dir(&args.out),
+        })
+        .collect();
+    if lidar.is_empty() {
+        eprintln!("--lidar-metrics: no LiDAR set in this run, nothing to measure");
+        return Ok(());
+    }
+    let cfg = EvalConfig::new(
+        false,
+        2.0,
+        args.sensor.as_deref(),
+        args.topic.clone(),
+        args.quiet,
+    )?;
+    let report = pool
+        .install(|| evaluate(&args.input, &lidar, &cfg))
+        .context("computing the LiDAR metrics")?;
+    let md = args.out.join("lidar_metrics.md");
+    std::fs::write(&md, render(&report, Format::Markdown)?)
+        .with_context(|| format!("cannot write {}", md.display()))?;
+    let json = args.out.join("lidar_metrics.json");
+    std::fs::write(&json, render(&report, Format::Json)?)
+        .with_context(|| format!("cannot write {}", json.display()))?;
+    print!("{}", render(&report, Format::Table)?);
+    eprintln!(
+        "LiDAR metrics written to {} and {}",
+        md.display(),
+        json.display()
+    );
     Ok(())
 }
 

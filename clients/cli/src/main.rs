@@ -11,10 +11,12 @@ mod ctl;
 mod dataset;
 mod demo;
 mod demo_offline;
+mod detect;
 mod files;
 mod gallery;
 mod hil;
 mod info;
+mod lidar_eval;
 mod list;
 mod metrics;
 mod pipeline;
@@ -51,8 +53,10 @@ enum Command {
     Gallery(gallery::Args),
     /// Write one randomly drawn perturbed variant per training sample, with a manifest.
     Augment(augment::Args),
-    /// The study's metric tables (steering MSE and deviation; detection retention and ATE).
+    /// The study's metric tables (steering MSE and deviation; LiDAR detection retention and ATE).
     Metrics(metrics::Args),
+    /// Run the LiDAR clustering detector on one point-cloud file and print its boxes.
+    Detect(detect::Args),
     /// Show what a file holds (image, point cloud, or a bag's topics) and check that it decodes.
     Info(info::Args),
     /// Run the product on synthetic camera and LiDAR data it generates itself.
@@ -79,6 +83,7 @@ fn main() {
         Command::Gallery(a) => gallery::run(a),
         Command::Augment(a) => augment::run(a),
         Command::Metrics(a) => metrics::run(a),
+        Command::Detect(a) => detect::run(a),
         Command::Info(a) => info::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Demo(a) => demo::run(a),

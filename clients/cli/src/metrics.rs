@@ -48,6 +48,61 @@ Frames are matched by the first column."
         #[arg(long, value_enum, default_value_t = Format::Table)]
         format: Format,
     },
+    /// LiDAR (RQ1): retention of the baseline detections and their translation error (ATE).
+    #[command(
+        after_help = "Runs the clustering detector (Autoware Mini's lidar_cluster pipeline: ground removal,
+voxel grid, DBSCAN, minimum-area boxes; see `perturb detect`) on every clean scan and on its
+counterpart in every finished set that `perturb batch` wrote under ROOT
+(ROOT/<ID>_<name>/s<N>/: a folder of scans or a bag), and matches the boxes frame by frame (greedy,
+one-to-one, centre distance in x, y within --match-distance).
+
+Per (perturbation, severity), pooled over the frames:
+  retention = baseline detections still matched / baseline detections   (recall, 0..1)
+  ATE       = mean centre distance of the matched boxes, metres
+Per perturbation (the paper's RQ1 table): retention average and minimum over the severities,
+ATE maximum over the severities. Frames are detected in parallel; the numbers do not depend
+on --threads.
+
+Examples:
+  perturb batch scans/ --out perturbed/ --id L-B1 --id L-A9
+  perturb metrics lidar --clean scans/ --perturbed perturbed/
+  perturb metrics lidar --perturbed perturbed/ --format csv > lidar.csv   # --clean from batch.json
+  perturb metrics lidar --clean drive.mcap --perturbed perturbed_bags/ --format markdown"
+    )]
+    Lidar {
+        /// The clean data: the folder of scans or the bag given to `perturb batch` (default: the
+        /// input recorded in PERTURBED/batch.json).
+        #[arg(long)]
+        clean: Option<PathBuf>,
+        /// The output root of `perturb batch`.
+        #[arg(long)]
+        perturbed: PathBuf,
+        /// Report format (csv: one row per perturbation and severity).
+        #[arg(long, value_enum, default_value_t = Format::Table)]
+        format: Format,
+        /// Only these perturbations (IDs or names, repeatable; default every LiDAR set found).
+        #[arg(long = "id")]
+        ids: Vec<String>,
+        /// Largest centre distance of a match in the ground plane, metres.
+        #[arg(long, default_value_t = 2.0)]
+        match_distance: f32,
+        /// Drop clusters too large to be a road user (longer than 20 m or over 50 m^2), as the
+        /// object-level perturbations do; by default every cluster counts, as in Autoware Mini.
+        #[arg(long)]
+        objects: bool,
+        /// LiDAR sensor model used to read the clouds (only the intensity scale depends on it).
+        #[arg(long)]
+        sensor: Option<String>,
+        /// Bags: only these PointCloud2 topics (repeatable; default all).
+        #[arg(long)]
+        topic: Vec<String>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Hide the progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
 }
 
 /// Runs `perturb metrics`.
@@ -58,6 +113,76 @@ pub fn run(a: Args) -> Result<()> {
             predictions,
             format,
         } => steering(&baseline, &predictions, format),
+        Command::Lidar {
+            clean,
+            perturbed,
+            format,
+            ids,
+            match_distance,
+            objects,
+            sensor,
+            topic,
+            threads,
+            quiet,
+        } => {
+            let clean = match clean {
+                Some(c) => c,
+                None => clean_from_manifest(&perturbed)?,
+            };
+            let mut sets = crate::lidar_eval::discover_sets(&perturbed)?;
+            if !ids.is_empty() {
+                let wanted = ids
+                    .iter()
+                    .map(|i| perturb_core::registry::find(i).map(|e| e.id))
+                    .collect::<std::result::Result<Vec<_>, _>>()?;
+                sets.retain(|s| wanted.contains(&s.entry.id));
+            }
+            if sets.is_empty() {
+                bail!(
+                    "no finished LiDAR set (<ID>_<name>/s<N>/ with a .done marker) under {}",
+                    perturbed.display()
+                );
+            }
+            let cfg = crate::lidar_eval::EvalConfig::new(
+                objects,
+                match_distance,
+                sensor.as_deref(),
+                topic,
+                quiet,
+            )?;
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.unwrap_or(0))
+                .build()?;
+            let report = pool.install(|| crate::lidar_eval::evaluate(&clean, &sets, &cfg))?;
+            print!("{}", crate::lidar_eval::render(&report, format)?);
+            Ok(())
+        }
+    }
+}
+
+/// The input recorded in ROOT/batch.json.
+fn clean_from_manifest(root: &Path) -> Result<PathBuf> {
+    let path = root.join("batch.json");
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!(
+            "cannot read {} to find the clean data; give it with --clean",
+            path.display()
+        )
+    })?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))?;
+    match v.get("input").and_then(|i| i.as_str()) {
+        Some(i) => {
+            eprintln!(
+                "clean data: {i} (from {}; override with --clean)",
+                path.display()
+            );
+            Ok(PathBuf::from(i))
+        }
+        None => bail!(
+            "{} records no input; give the clean data with --clean",
+            path.display()
+        ),
     }
 }
 

@@ -1,0 +1,556 @@
+//! LiDAR detection metrics (paper, RQ1) over the perturbed sets that `perturb batch` writes.
+//!
+//! The clustering detector (`perturb_core::detector`, after Autoware Mini) runs on every clean
+//! scan and on its perturbed counterpart in each set `ROOT/<ID>_<name>/s<N>/`; the boxes are
+//! matched per frame (`perturb_core::metrics::detection_metrics`: greedy, one-to-one, ground-plane
+//! centre distance within the match radius) and the counts are pooled over the frames of a set:
+//! retention = matched baseline detections / baseline detections over all frames (the recall of
+//! the baseline detections over the dataset), ATE = mean centre distance over all matches. Per
+//! perturbation, the severities are summarised as the paper does: average and minimum retention,
+//! maximum ATE.
+//!
+//! Frames are detected in parallel (rayon); each frame's boxes depend only on its points, and the
+//! pooling runs in frame order afterwards, so the numbers do not depend on the thread count.
+
+use crate::dataset::Dataset;
+use crate::files::{Loaded, load};
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use perturb_bag::{Bag, Filter, SensorMessage};
+use perturb_core::detector::{Detector, DetectorConfig};
+use perturb_core::lidar::{Box3, Points};
+use perturb_core::metrics::{
+    DetectionMetrics, LidarSummary, MatchConfig, detection_metrics, summarize_lidar,
+};
+use perturb_core::registry::{CATALOGUE, Entry, Modality};
+use perturb_core::sensors::SensorModel;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+
+/// Output format of a metrics table.
+pub use crate::metrics::Format;
+
+/// Bag clouds decoded and then detected together (in parallel) at a time.
+const BAG_CHUNK: usize = 16;
+
+/// How the metrics are computed.
+#[derive(Clone, Debug)]
+pub struct EvalConfig {
+    /// The detector's parameters.
+    pub detector: DetectorConfig,
+    /// `"default"` or `"objects"`, for the report.
+    pub detector_name: &'static str,
+    /// Box matching.
+    pub matching: MatchConfig,
+    /// Sensor model used to read the clouds (only the intensity scale depends on it; the
+    /// detector uses x, y, z).
+    pub sensor: SensorModel,
+    /// Bags: only these PointCloud2 topics (all when empty).
+    pub topics: Vec<String>,
+    /// Hide the progress bar.
+    pub quiet: bool,
+}
+
+impl EvalConfig {
+    /// The configuration from the command-line options: the detector's reference parameters
+    /// (`objects`: plus the road-user size limit), the match radius, the sensor model (default
+    /// VLP-32C; it only sets the intensity scale).
+    pub fn new(
+        objects: bool,
+        match_distance: f32,
+        sensor: Option<&str>,
+        topics: Vec<String>,
+        quiet: bool,
+    ) -> Result<Self> {
+        if !(match_distance.is_finite() && match_distance > 0.0) {
+            bail!("--match-distance must be a positive number of metres, not {match_distance}");
+        }
+        Ok(EvalConfig {
+            detector: if objects {
+                DetectorConfig::objects()
+            } else {
+                DetectorConfig::default()
+            },
+            detector_name: if objects { "objects" } else { "default" },
+            matching: MatchConfig {
+                max_center_distance: match_distance,
+            },
+            sensor: match sensor {
+                Some(s) => SensorModel::by_name(s)?,
+                None => SensorModel::default(),
+            },
+            topics,
+            quiet,
+        })
+    }
+}
+
+/// Where the clean frames are, and where a perturbed set's counterparts are.
+#[derive(Clone, Debug)]
+pub enum Source {
+    /// Point-cloud files `root/rel` for every `rel` (sorted).
+    Files {
+        /// The folder.
+        root: PathBuf,
+        /// Paths relative to `root`.
+        files: Vec<PathBuf>,
+    },
+    /// A rosbag2 MCAP bag: every PointCloud2 message, keyed by topic and index on the topic.
+    Bag(PathBuf),
+}
+
+impl Source {
+    /// The clean dataset at `path` (a folder of point clouds, or a bag).
+    pub fn open(path: &Path) -> Result<Source> {
+        Ok(match Dataset::open(path)? {
+            Dataset::Files {
+                root,
+                files,
+                modality: Modality::Lidar,
+            } => Source::Files { root, files },
+            Dataset::Files { .. } => bail!(
+                "{} holds images; the LiDAR metrics need point clouds (.bin .pcd .pcd.bin) or a bag",
+                path.display()
+            ),
+            Dataset::Bag(p) => Source::Bag(p),
+        })
+    }
+
+    /// The same frames in a perturbed set directory (same relative files, or a bag).
+    fn in_set(&self, dir: &Path) -> Source {
+        match self {
+            Source::Files { files, .. } => Source::Files {
+                root: dir.to_path_buf(),
+                files: files.clone(),
+            },
+            Source::Bag(_) => Source::Bag(dir.to_path_buf()),
+        }
+    }
+}
+
+/// The boxes of every frame of a source, in frame order, keyed by relative path (files) or
+/// `topic#index` (bags).
+pub type FrameBoxes = Vec<(String, Vec<Box3>)>;
+
+fn points_of_file(path: &Path, sensor: &SensorModel) -> Result<Points> {
+    match load(path)? {
+        Loaded::Cloud(c, _, _) => Points::extract(&c.view(), sensor, false)
+            .with_context(|| format!("reading the points of {}", path.display())),
+        Loaded::Image(..) => bail!("{} is an image, not a point cloud", path.display()),
+    }
+}
+
+/// Runs the detector on every frame of `source`.
+pub fn detect_source(source: &Source, cfg: &EvalConfig, pb: &ProgressBar) -> Result<FrameBoxes> {
+    match source {
+        Source::Files { root, files } => files
+            .par_iter()
+            .map_init(
+                || Detector::new(cfg.detector.clone()),
+                |det, rel| {
+                    let path = root.join(rel);
+                    if !path.exists() {
+                        bail!(
+                            "{} is missing (the set is incomplete; rerun `perturb batch` to finish it)",
+                            path.display()
+                        );
+                    }
+                    let p = points_of_file(&path, &cfg.sensor)?;
+                    let boxes = det.detect(&p);
+                    pb.inc(1);
+                    Ok((rel.display().to_string(), boxes))
+                },
+            )
+            .collect(),
+        Source::Bag(path) => detect_bag(path, cfg, pb),
+    }
+}
+
+fn detect_bag(path: &Path, cfg: &EvalConfig, pb: &ProgressBar) -> Result<FrameBoxes> {
+    let bag = Bag::open(path).with_context(|| format!("opening the bag {}", path.display()))?;
+    let mut out: FrameBoxes = Vec::new();
+    let mut chunk: Vec<(String, Points)> = Vec::with_capacity(BAG_CHUNK);
+    let mut index: HashMap<String, u64> = HashMap::new();
+    let flush = |chunk: &mut Vec<(String, Points)>, out: &mut FrameBoxes| {
+        let done: FrameBoxes = chunk
+            .par_iter()
+            .map_init(
+                || Detector::new(cfg.detector.clone()),
+                |det, (key, p)| (key.clone(), det.detect(p)),
+            )
+            .collect();
+        pb.inc(done.len() as u64);
+        out.extend(done);
+        chunk.clear();
+    };
+    let filter = Filter {
+        topics: cfg.topics.clone(),
+        ..Filter::default()
+    };
+    let report = bag.for_each(&filter, |m| {
+        if m.type_name != "sensor_msgs/msg/PointCloud2" {
+            return Ok(ControlFlow::Continue(()));
+        }
+        let Some(Ok(SensorMessage::Cloud(pc))) = m.decode() else {
+            return Err(perturb_bag::BagError::Callback(format!(
+                "{}: `{}` at log time {}: the PointCloud2 message does not decode",
+                m.path.display(),
+                m.topic,
+                m.log_time
+            )));
+        };
+        let points = pc
+            .view()
+            .and_then(|v| Points::extract(&v, &cfg.sensor, false))
+            .map_err(|e| {
+                perturb_bag::BagError::Callback(format!(
+                    "{}: `{}` at log time {}: {e}",
+                    m.path.display(),
+                    m.topic,
+                    m.log_time
+                ))
+            })?;
+        let k = index.entry(m.topic.to_string()).or_default();
+        chunk.push((format!("{}#{}", m.topic, *k), points));
+        *k += 1;
+        if chunk.len() == BAG_CHUNK {
+            flush(&mut chunk, &mut out);
+        }
+        Ok(ControlFlow::Continue(()))
+    })?;
+    flush(&mut chunk, &mut out);
+    if let Some(d) = report.damage {
+        bail!("the bag {} is damaged: {d}", path.display());
+    }
+    Ok(out)
+}
+
+/// One perturbed set found under a batch output root.
+#[derive(Clone, Debug)]
+pub struct SetDir {
+    /// The perturbation.
+    pub entry: &'static Entry,
+    /// Severity.
+    pub severity: u8,
+    /// `ROOT/<ID>_<name>/s<N>`.
+    pub dir: PathBuf,
+}
+
+/// The finished LiDAR sets under `root` (`<ID>_<name>/s<N>/` with a `.done` marker), in catalogue
+/// and severity order. Unfinished sets are skipped with a warning; camera sets are ignored.
+pub fn discover_sets(root: &Path) -> Result<Vec<SetDir>> {
+    let mut sets = Vec::new();
+    let rd = std::fs::read_dir(root).with_context(|| format!("cannot read {}", root.display()))?;
+    for e in rd {
+        let dir = e?.path();
+        if !dir.is_dir() {
+            continue;
+        }
+        let name = dir
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
+        let Some(entry) = CATALOGUE
+            .iter()
+            .filter(|e| name == format!("{}_{}", e.id, e.name))
+            .max_by_key(|e| e.id.len())
+        else {
+            continue;
+        };
+        if entry.modality != Modality::Lidar {
+            continue;
+        }
+        for s in
+            std::fs::read_dir(&dir).with_context(|| format!("cannot read {}", dir.display()))?
+        {
+            let sdir = s?.path();
+            let Some(severity) = sdir
+                .file_name()
+                .and_then(|n| n.to_str())
+                .and_then(|n| n.strip_prefix('s'))
+                .and_then(|n| n.parse::<u8>().ok())
+            else {
+                continue;
+            };
+            if !sdir.is_dir() {
+                continue;
+            }
+            if !sdir.join(".done").exists() {
+                eprintln!(
+                    "skipping {}: unfinished (no .done marker; rerun `perturb batch` to finish it)",
+                    sdir.display()
+                );
+                continue;
+            }
+            sets.push(SetDir {
+                entry,
+                severity,
+                dir: sdir,
+            });
+        }
+    }
+    sets.sort_by_key(|s| {
+        (
+            CATALOGUE.iter().position(|c| c.id == s.entry.id),
+            s.severity,
+        )
+    });
+    Ok(sets)
+}
+
+/// The metrics of one (perturbation, severity) set.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SetMetrics {
+    /// Perturbation ID.
+    pub id: &'static str,
+    /// Perturbation name.
+    pub name: &'static str,
+    /// Severity.
+    pub severity: u8,
+    /// Frames compared.
+    pub frames: usize,
+    /// Pooled over the frames.
+    #[serde(flatten)]
+    pub m: DetectionMetrics,
+}
+
+/// One perturbation summarised over its severities.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct PerturbationSummary {
+    /// Perturbation ID.
+    pub id: &'static str,
+    /// Perturbation name.
+    pub name: &'static str,
+    /// The severities evaluated.
+    pub severities: Vec<u8>,
+    /// Average / minimum retention, maximum ATE.
+    #[serde(flatten)]
+    pub s: LidarSummary,
+}
+
+/// The whole evaluation.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Report {
+    /// The clean dataset.
+    pub clean: String,
+    /// Clean frames.
+    pub frames: usize,
+    /// Detections on the clean frames.
+    pub baseline_detections: usize,
+    /// `default` (Autoware Mini's parameters) or `objects` (plus a road-user size limit).
+    pub detector: &'static str,
+    /// Largest matched centre distance, metres.
+    pub match_distance_m: f32,
+    /// Per set.
+    pub per_severity: Vec<SetMetrics>,
+    /// Per perturbation.
+    pub per_perturbation: Vec<PerturbationSummary>,
+}
+
+fn progress(total: u64, quiet: bool) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(total);
+    pb.set_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:40}] {pos}/{len} clouds detected {msg}",
+        )
+        .expect("template")
+        .progress_chars("=> "),
+    );
+    pb
+}
+
+/// Pools the per-frame metrics of a set against the clean boxes, in the clean frame order.
+pub fn compare(
+    clean: &FrameBoxes,
+    perturbed: &FrameBoxes,
+    m: &MatchConfig,
+) -> Result<DetectionMetrics> {
+    let index: HashMap<&str, &Vec<Box3>> = perturbed.iter().map(|(k, b)| (k.as_str(), b)).collect();
+    let mut total = DetectionMetrics {
+        retention: 1.0,
+        ..DetectionMetrics::default()
+    };
+    for (key, base) in clean {
+        let Some(p) = index.get(key.as_str()) else {
+            bail!("frame `{key}` of the clean data has no perturbed counterpart");
+        };
+        total.add(&detection_metrics(base, p, m));
+    }
+    Ok(total)
+}
+
+/// Detects on the clean data and on every set, and computes the metrics.
+pub fn evaluate(clean_path: &Path, sets: &[SetDir], cfg: &EvalConfig) -> Result<Report> {
+    if sets.is_empty() {
+        bail!("no finished LiDAR set to evaluate");
+    }
+    let clean = Source::open(clean_path)?;
+    let frames_hint = match &clean {
+        Source::Files { files, .. } => files.len() as u64,
+        Source::Bag(_) => 0,
+    };
+    let pb = progress(frames_hint * (sets.len() as u64 + 1), cfg.quiet);
+    pb.set_message("clean".to_string());
+    let base = detect_source(&clean, cfg, &pb)
+        .with_context(|| format!("detecting on the clean data {}", clean_path.display()))?;
+    if base.is_empty() {
+        bail!("{} holds no point cloud", clean_path.display());
+    }
+    if frames_hint == 0 {
+        pb.set_length(base.len() as u64 * (sets.len() as u64 + 1));
+    }
+    let mut per_severity = Vec::new();
+    for set in sets {
+        pb.set_message(format!("{} s{}", set.entry.id, set.severity));
+        let pert = detect_source(&clean.in_set(&set.dir), cfg, &pb)
+            .with_context(|| format!("detecting on {}", set.dir.display()))?;
+        let m = compare(&base, &pert, &cfg.matching).with_context(|| {
+            format!(
+                "comparing {} with {}",
+                set.dir.display(),
+                clean_path.display()
+            )
+        })?;
+        per_severity.push(SetMetrics {
+            id: set.entry.id,
+            name: set.entry.name,
+            severity: set.severity,
+            frames: base.len(),
+            m,
+        });
+    }
+    pb.finish_and_clear();
+    let mut per_perturbation: Vec<PerturbationSummary> = Vec::new();
+    for r in &per_severity {
+        if per_perturbation.last().is_none_or(|p| p.id != r.id) {
+            let rows: Vec<&SetMetrics> = per_severity.iter().filter(|x| x.id == r.id).collect();
+            per_perturbation.push(PerturbationSummary {
+                id: r.id,
+                name: r.name,
+                severities: rows.iter().map(|x| x.severity).collect(),
+                s: summarize_lidar(&rows.iter().map(|x| x.m).collect::<Vec<_>>()),
+            });
+        }
+    }
+    Ok(Report {
+        clean: clean_path.display().to_string(),
+        frames: base.len(),
+        baseline_detections: base.iter().map(|(_, b)| b.len()).sum(),
+        detector: cfg.detector_name,
+        match_distance_m: cfg.matching.max_center_distance,
+        per_severity,
+        per_perturbation,
+    })
+}
+
+fn frames(n: usize) -> String {
+    format!("{n} frame{}", if n == 1 { "" } else { "s" })
+}
+
+fn ate(v: Option<f64>) -> String {
+    v.map_or("-".to_string(), |a| format!("{a:.3}"))
+}
+
+/// The report in `format`.
+pub fn render(r: &Report, format: Format) -> Result<String> {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let per_sev = |id: &str, md: bool| -> String {
+        r.per_severity
+            .iter()
+            .filter(|x| x.id == id)
+            .map(|x| {
+                if md {
+                    format!("s{}: {:.3} / {}", x.severity, x.m.retention, ate(x.m.ate))
+                } else {
+                    format!("s{} {:.3}/{}", x.severity, x.m.retention, ate(x.m.ate))
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(if md { ", " } else { "  " })
+    };
+    match format {
+        Format::Json => s = serde_json::to_string_pretty(r)? + "\n",
+        Format::Csv => {
+            writeln!(
+                s,
+                "id,name,severity,frames,baseline,retained,retention,ate_m"
+            )?;
+            for x in &r.per_severity {
+                writeln!(
+                    s,
+                    "{},{},{},{},{},{},{},{}",
+                    x.id,
+                    x.name,
+                    x.severity,
+                    x.frames,
+                    x.m.baseline,
+                    x.m.retained,
+                    x.m.retention,
+                    x.m.ate.map_or(String::new(), |a| a.to_string())
+                )?;
+            }
+        }
+        Format::Markdown => {
+            writeln!(
+                s,
+                "LiDAR detection metrics: {} of `{}`, {} baseline detections (detector `{}`, match within {} m)\n",
+                frames(r.frames),
+                r.clean,
+                r.baseline_detections,
+                r.detector,
+                r.match_distance_m
+            )?;
+            writeln!(
+                s,
+                "| id | name | avg retention | min retention | max ATE (m) | retention / ATE per severity |\n|---|---|---:|---:|---:|---|"
+            )?;
+            for p in &r.per_perturbation {
+                writeln!(
+                    s,
+                    "| {} | {} | {:.3} | {:.3} | {} | {} |",
+                    p.id,
+                    p.name,
+                    p.s.avg_retention,
+                    p.s.min_retention,
+                    ate(p.s.max_ate),
+                    per_sev(p.id, true)
+                )?;
+            }
+        }
+        Format::Table => {
+            writeln!(
+                s,
+                "{} of {}, {} baseline detections (detector {}, match within {} m)",
+                frames(r.frames),
+                r.clean,
+                r.baseline_detections,
+                r.detector,
+                r.match_distance_m
+            )?;
+            writeln!(
+                s,
+                "{:<7} {:<26} {:>8} {:>8} {:>8}  retention/ATE per severity",
+                "id", "name", "avg_ret", "min_ret", "max_ate"
+            )?;
+            for p in &r.per_perturbation {
+                writeln!(
+                    s,
+                    "{:<7} {:<26} {:>8.3} {:>8.3} {:>8}  {}",
+                    p.id,
+                    p.name,
+                    p.s.avg_retention,
+                    p.s.min_retention,
+                    ate(p.s.max_ate),
+                    per_sev(p.id, false)
+                )?;
+            }
+        }
+    }
+    Ok(s)
+}
