@@ -244,13 +244,20 @@ pub const SHARPEN: [(i32, f64); 5] = [(1, 0.9), (2, 0.8), (3, 0.7), (4, 0.6), (5
 /// OpenCV's `addWeighted`. A flat grey 100 becomes 100, 120, 146, 162, 178 at severities 1..5.
 pub struct Sharpen {
     k: i32,
-    w: f64,
+    /// `blend[v * 256 + s]`: the rounded weighted sum of original `v` and sharpened `s`.
+    blend: Vec<u8>,
 }
 
 /// Registry constructor of C-D4.
 pub const SHARPEN_BUILDER: CameraBuilder = |s| {
     let (k, w) = SHARPEN[s.level()];
-    Ok(Box::new(Sharpen { k, w }))
+    let blend = (0..256 * 256)
+        .map(|i| {
+            let (v, s) = ((i / 256) as f64, (i % 256) as f64);
+            (w * v + (1.0 - w) * s).round_ties_even().clamp(0.0, 255.0) as u8
+        })
+        .collect();
+    Ok(Box::new(Sharpen { k, blend }))
 };
 
 impl CameraPerturbation for Sharpen {
@@ -260,40 +267,55 @@ impl CameraPerturbation for Sharpen {
             input.height as usize,
             input.format.channels(),
         );
-        let blend: Vec<Vec<u8>> = (0..256)
-            .map(|i| {
-                (0..256)
-                    .map(|s| {
-                        (self.w * i as f64 + (1.0 - self.w) * s as f64)
-                            .round_ties_even()
-                            .clamp(0.0, 255.0) as u8
-                    })
-                    .collect()
-            })
-            .collect();
-        let xm: Vec<[usize; 3]> = (0..w)
-            .map(|x| [-1i64, 0, 1].map(|d| reflect101(x as i64 + d, w) * c))
-            .collect();
         let format = input.format;
         let centre = 9 + self.k; // 8 + k, plus one to cancel the centre's -1 in the 3x3 sum below
+        let row_len = w * c;
         par_rows(input, output, |y, src, dst| {
             let rows = [-1i64, 0, 1].map(|d| input.row(reflect101(y as i64 + d, h)));
-            for x in 0..w {
-                for ch in 0..c {
-                    let mut box_sum = 0i32;
-                    for r in &rows {
-                        for &xx in &xm[x] {
-                            box_sum += r[xx + ch] as i32;
-                        }
-                    }
-                    let v = src[x * c + ch] as i32;
-                    let s = (centre * v - box_sum).clamp(0, 255) as usize;
-                    dst[x * c + ch] = blend[v as usize][s];
-                }
+            // Vertical sums of the three rows, then horizontal sums of three columns.
+            let col: Vec<i16> = rows[0][..row_len]
+                .iter()
+                .zip(&rows[1][..row_len])
+                .zip(&rows[2][..row_len])
+                .map(|((a, b), d)| *a as i16 + *b as i16 + *d as i16)
+                .collect();
+            match c {
+                1 => sharpen_row::<1>(&col, src, dst, centre, &self.blend),
+                3 => sharpen_row::<3>(&col, src, dst, centre, &self.blend),
+                _ => sharpen_row::<4>(&col, src, dst, centre, &self.blend),
             }
             copy_alpha(format, src, dst);
         });
     }
+}
+
+/// One row of [`Sharpen`] for `C` channels, from the row's vertical 3-sums `col`.
+fn sharpen_row<const C: usize>(col: &[i16], src: &[u8], dst: &mut [u8], centre: i32, blend: &[u8]) {
+    let w = col.len() / C;
+    let px = |x: usize, l: usize, r: usize, dst: &mut [u8]| {
+        for ch in 0..C {
+            let box_sum = col[l * C + ch] as i32 + col[x * C + ch] as i32 + col[r * C + ch] as i32;
+            let v = src[x * C + ch] as i32;
+            let s = (centre * v - box_sum).clamp(0, 255) as usize;
+            dst[x * C + ch] = blend[v as usize * 256 + s];
+        }
+    };
+    if w < 3 {
+        for x in 0..w {
+            px(
+                x,
+                reflect101(x as i64 - 1, w),
+                reflect101(x as i64 + 1, w),
+                dst,
+            );
+        }
+        return;
+    }
+    px(0, 1, 1, dst);
+    for x in 1..w - 1 {
+        px(x, x - 1, x + 1, dst);
+    }
+    px(w - 1, w - 2, w - 2, dst);
 }
 
 #[cfg(test)]
