@@ -452,6 +452,47 @@ impl FloatImage {
         &self.data[y * self.w * self.c..(y + 1) * self.w * self.c]
     }
 
+    /// `FloatImage::from_view(v).pad_reflect(pad).downsample(f)` in one pass over the 8-bit
+    /// image, without the two full-resolution float copies (same sums in the same order, so the
+    /// same values).
+    pub fn downsample_padded(v: &ImageView<'_>, pad: usize, f: usize) -> FloatImage {
+        let (w, h, c) = (v.width as usize, v.height as usize, v.format.channels());
+        let (pw, ph) = (w + 2 * pad, h + 2 * pad);
+        let (w2, h2) = (pw.div_ceil(f), ph.div_ceil(f));
+        let xmap: Vec<usize> = (0..pw)
+            .map(|x| reflect101(x as i64 - pad as i64, w) * c)
+            .collect();
+        let mut data = vec![0f32; w2 * h2 * c];
+        data.par_chunks_mut((w2 * c).max(1))
+            .enumerate()
+            .for_each(|(y2, row)| {
+                let ys = y2 * f..((y2 + 1) * f).min(ph);
+                let ny = ys.len();
+                for y in ys {
+                    let src = v.row(reflect101(y as i64 - pad as i64, h));
+                    for (x2, out) in row.chunks_exact_mut(c).enumerate() {
+                        for &sx in &xmap[x2 * f..((x2 + 1) * f).min(pw)] {
+                            for (o, s) in out.iter_mut().zip(&src[sx..sx + c]) {
+                                *o += *s as f32;
+                            }
+                        }
+                    }
+                }
+                for (x2, out) in row.chunks_exact_mut(c).enumerate() {
+                    let n = (ny * (((x2 + 1) * f).min(pw) - x2 * f)) as f32;
+                    for o in out {
+                        *o /= n;
+                    }
+                }
+            });
+        FloatImage {
+            w: w2,
+            h: h2,
+            c,
+            data,
+        }
+    }
+
     /// Box-downsamples by an integer factor (edge blocks average what they cover).
     pub fn downsample(&self, f: usize) -> FloatImage {
         let (w2, h2, c) = (self.w.div_ceil(f), self.h.div_ceil(f), self.c);
@@ -564,12 +605,14 @@ impl FloatImage {
         (0..h).into_par_iter().with_min_len(8).for_each(|y| {
             let (y0, y1, wy) = map(y, self.h);
             let (r0, r1) = (self.row(y0), self.row(y1));
+            // Vertical interpolation at low resolution first, then one horizontal lerp per
+            // output sample (bilinear interpolation is separable).
+            let vrow: Vec<f32> = r0.iter().zip(r1).map(|(a, b)| a + (b - a) * wy).collect();
             let mut row = vec![0f32; w * c];
-            for (x, &(x0, x1, wx)) in xmap.iter().enumerate() {
-                for ch in 0..c {
-                    let a = r0[x0 * c + ch] + (r0[x1 * c + ch] - r0[x0 * c + ch]) * wx;
-                    let b = r1[x0 * c + ch] + (r1[x1 * c + ch] - r1[x0 * c + ch]) * wx;
-                    row[x * c + ch] = a + (b - a) * wy;
+            for (out, &(x0, x1, wx)) in row.chunks_exact_mut(c).zip(&xmap) {
+                let (p0, p1) = (&vrow[x0 * c..x0 * c + c], &vrow[x1 * c..x1 * c + c]);
+                for ((o, a), b) in out.iter_mut().zip(p0).zip(p1) {
+                    *o = a + (b - a) * wx;
                 }
             }
             emit(y, &row);
@@ -602,10 +645,10 @@ pub fn gaussian_rows(
     emit: impl Fn(usize, &[f32]) + Sync,
 ) {
     let sigma = if sigma > 0.0 { sigma } else { opencv_sigma(k) };
-    let img = FloatImage::from_view(input);
-    let (w, h) = (img.w, img.h);
+    let (w, h) = (input.width as usize, input.height as usize);
     let f = gaussian_factor(sigma, w, h);
     if f == 1 {
+        let img = FloatImage::from_view(input);
         let kk = k.max(1) | 1;
         let out = img.convolve(&gaussian_kernel(kk, sigma));
         (0..h).into_par_iter().for_each(|y| emit(y, out.row(y)));
@@ -618,10 +661,7 @@ pub fn gaussian_rows(
     // Pad at full resolution (a multiple of f, wider than the kernel) so the borders reflect
     // exactly as the full-resolution filter does; crop after upsampling.
     let pad = ((3.0 * sigma).ceil() as usize).div_ceil(f) * f + f;
-    let small = img
-        .pad_reflect(pad)
-        .downsample(f)
-        .convolve(&gaussian_kernel(k2, s2));
+    let small = FloatImage::downsample_padded(input, pad, f).convolve(&gaussian_kernel(k2, s2));
     small.upsample_rows(f, pad, w, h, emit);
 }
 
@@ -707,6 +747,24 @@ mod tests {
                 differ * 10 < got.data.len(),
                 "k {k}: {differ} samples differ"
             );
+        }
+    }
+
+    #[test]
+    fn one_pass_padded_downsampling_equals_the_three_step_one() {
+        let img = crate::synthetic::street_image(97, 61, 2);
+        for (pad, f) in [(6usize, 2usize), (12, 4), (3, 3)] {
+            let want = FloatImage::from_view(&img.view())
+                .pad_reflect(pad)
+                .downsample(f);
+            let got = FloatImage::downsample_padded(&img.view(), pad, f);
+            assert_eq!((got.w, got.h, got.c), (want.w, want.h, want.c));
+            for (a, b) in got.data.iter().zip(&want.data) {
+                assert!(
+                    (a - b).abs() <= 1e-4 * b.abs().max(1.0),
+                    "pad {pad} f {f}: {a} vs {b}"
+                );
+            }
         }
     }
 
