@@ -72,13 +72,16 @@ impl Elastic {
         let mut tmp = vec![0f32; w * h];
         tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
             let src = &raw[y * w..(y + 1) * w];
-            for (x, o) in out.iter_mut().enumerate() {
-                *o = self
-                    .kernel
-                    .iter()
-                    .enumerate()
-                    .map(|(t, k)| k * src[reflect101(x as i64 + t as i64 - r as i64, w)])
-                    .sum();
+            // The row padded once (reflect-101), then one shifted multiply-add per tap, in tap
+            // order (the same sums as tap-by-tap per pixel).
+            let padded: Vec<f32> = (0..w + 2 * r)
+                .map(|p| src[reflect101(p as i64 - r as i64, w)])
+                .collect();
+            out.fill(0.0);
+            for (t, k) in self.kernel.iter().enumerate() {
+                for (o, s) in out.iter_mut().zip(&padded[t..t + w]) {
+                    *o += k * s;
+                }
             }
         });
         raw.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
