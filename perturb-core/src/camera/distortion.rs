@@ -222,14 +222,34 @@ impl CameraPerturbation for SamplePairing {
         let (sx, sy) = (cw as f32 / w as f32, ch as f32 / h as f32);
         let a = self.alpha;
         let format = input.format;
+        // The crop's sampling positions depend on x or y alone: (first, second, weight) per
+        // column and per row, as `sample_reflect` computes them per pixel.
+        let tap = |f: f32, n: usize| {
+            let f0 = f.floor();
+            let i0 = f0 as i64;
+            (reflect101(i0, n), reflect101(i0 + 1, n), f - f0)
+        };
+        let cols: Vec<(usize, usize, f32)> = (0..w)
+            .map(|x| {
+                let (a, b, wx) = tap(
+                    ox + ((x as f32 + 0.5) * sx - 0.5).clamp(0.0, (cw - 1) as f32),
+                    w,
+                );
+                (a * c, b * c, wx)
+            })
+            .collect();
         par_rows(input, output, |y, src, dst| {
-            let fy = oy + ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (ch - 1) as f32);
-            let mut px = vec![0u8; c];
-            for (x, q) in dst.chunks_exact_mut(c).enumerate() {
-                let fx = ox + ((x as f32 + 0.5) * sx - 0.5).clamp(0.0, (cw - 1) as f32);
-                sample_reflect(input, fx, fy, &mut px);
+            let (ya, yb, wy) = tap(
+                oy + ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (ch - 1) as f32),
+                h,
+            );
+            let (ra, rb) = (input.row(ya), input.row(yb));
+            for ((x, q), &(xa, xb, wx)) in dst.chunks_exact_mut(c).enumerate().zip(&cols) {
                 for k in 0..c {
-                    q[k] = (a * src[x * c + k] as f32 + (1.0 - a) * px[k] as f32 + 0.5) as u8;
+                    let top = ra[xa + k] as f32 * (1.0 - wx) + ra[xb + k] as f32 * wx;
+                    let bot = rb[xa + k] as f32 * (1.0 - wx) + rb[xb + k] as f32 * wx;
+                    let p = (top * (1.0 - wy) + bot * wy + 0.5) as u8;
+                    q[k] = (a * src[x * c + k] as f32 + (1.0 - a) * p as f32 + 0.5) as u8;
                 }
             }
             copy_alpha(format, src, dst);
