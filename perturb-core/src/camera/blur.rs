@@ -200,9 +200,23 @@ impl CameraPerturbation for MotionBlur {
             .collect();
         par_rows(input, output, |y, src, dst| {
             let mut acc = vec![0u16; w * c];
-            for (&(dy, _), xmap) in self.taps.iter().zip(&xmaps) {
+            for (&(dy, dx), xmap) in self.taps.iter().zip(&xmaps) {
                 let row = input.row(reflect101(y as i64 + dy, h));
-                for (x, &sx) in xmap.iter().enumerate() {
+                // Inside the frame a tap is a shifted copy of the row (one contiguous add);
+                // only the border columns go through the reflected index map.
+                let lo = ((-dx).max(0) as usize).min(w);
+                let hi = (w as i64 - dx.max(0)).clamp(lo as i64, w as i64) as usize;
+                if hi > lo {
+                    let shift = (lo as i64 + dx) as usize * c;
+                    for (a, s) in acc[lo * c..hi * c]
+                        .iter_mut()
+                        .zip(&row[shift..shift + (hi - lo) * c])
+                    {
+                        *a += *s as u16;
+                    }
+                }
+                for x in (0..lo).chain(hi..w) {
+                    let sx = xmap[x];
                     for ch in 0..c {
                         acc[x * c + ch] += row[sx * c + ch] as u16;
                     }
