@@ -387,35 +387,46 @@ where
 pub fn map_saturation(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, smap: &[u8; 256]) {
     let format = input.format;
     let c = format.channels();
-    let [ri, gi, bi] = format.rgb_offsets();
+    let rgb = format.rgb_offsets();
     let recip = reciprocals();
-    par_rows(input, output, |_, src, dst| {
-        if format.is_mono() {
-            dst.copy_from_slice(src);
-            return;
+    // Per saturation S: the factor S' / S in 32.32 fixed point.
+    let mut gain = [0i64; 256];
+    for (s, g) in gain.iter_mut().enumerate().skip(1) {
+        *g = smap[s] as i64 * recip[s] as i64;
+    }
+    par_rows(input, output, |_, src, dst| match c {
+        _ if format.is_mono() => dst.copy_from_slice(src),
+        3 => saturation_row::<3>(src, dst, rgb, &recip, &gain),
+        4 => {
+            saturation_row::<4>(src, dst, rgb, &recip, &gain);
+            copy_alpha(format, src, dst);
         }
-        for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
-            let (r, g, b) = (p[ri] as i64, p[gi] as i64, p[bi] as i64);
-            let v = r.max(g).max(b);
-            let mn = r.min(g).min(b);
-            let diff = v - mn;
-            if diff == 0 {
-                q[ri] = p[ri];
-                q[gi] = p[gi];
-                q[bi] = p[bi];
-            } else {
-                // S = round(255 diff / V), then c' = V - (V - c) S' / S, with reciprocal tables.
-                let s = ((diff * 255 * recip[v as usize] as i64 + (1 << 31)) >> 32).clamp(1, 255);
-                let k = smap[s as usize] as i64 * recip[s as usize] as i64;
-                for (ch, val) in [(ri, r), (gi, g), (bi, b)] {
-                    q[ch] = (v - (((v - val) * k + (1 << 31)) >> 32)).clamp(0, 255) as u8;
-                }
-            }
-            if let Some(a) = format.alpha_offset() {
-                q[a] = p[a];
-            }
-        }
+        _ => unreachable!("colour formats have 3 or 4 channels"),
     });
+}
+
+/// One row of [`map_saturation`] for pixels of `C` bytes with colour bytes at `rgb`.
+#[inline(always)]
+fn saturation_row<const C: usize>(
+    src: &[u8],
+    dst: &mut [u8],
+    [ri, gi, bi]: [usize; 3],
+    recip: &[u64; 256],
+    gain: &[i64; 256],
+) {
+    for (p, q) in src.chunks_exact(C).zip(dst.chunks_exact_mut(C)) {
+        let (r, g, b) = (p[ri] as i64, p[gi] as i64, p[bi] as i64);
+        let v = r.max(g).max(b);
+        let diff = v - r.min(g).min(b);
+        // S = round(255 diff / V), then c' = V - (V - c) S' / S, with
+        // reciprocal tables.
+        // When diff = 0 every channel equals V and the gain does not matter.
+        let s = ((diff * 255 * recip[v as usize] as i64 + (1 << 31)) >> 32).clamp(1, 255);
+        let k = gain[s as usize];
+        for (ch, val) in [(ri, r), (gi, g), (bi, b)] {
+            q[ch] = (v - (((v - val) * k + (1 << 31)) >> 32)).clamp(0, 255) as u8;
+        }
+    }
 }
 
 /// An interleaved f32 image (same channel layout as the source), for intermediate results.
