@@ -263,24 +263,23 @@ pub const SHARPEN: [(i32, f64); 5] = [(1, 0.9), (2, 0.8), (3, 0.7), (4, 0.6), (5
 
 /// C-D4 sharpen: over-sharpening with the reference's kernel [[-1,-1,-1],[-1,8+k,-1],[-1,-1,-1]],
 /// whose sum is k and which is not normalised, so it also brightens by k and saturates in 8 bits
-/// (`cv2.filter2D`, reflect-101 borders); then `out = w I + (1 - w) S`, rounded half to even as
-/// OpenCV's `addWeighted`. A flat grey 100 becomes 100, 120, 146, 162, 178 at severities 1..5.
+/// (`cv2.filter2D`, reflect-101 borders); then `out = w I + (1 - w) S`, computed exactly in tenths
+/// and rounded half to even (OpenCV's `addWeighted` rounds its float sum half to even, so it can
+/// differ by one level on the exact ties). A flat grey 100 becomes 100, 120, 146, 162, 178 at
+/// severities 1..5.
 pub struct Sharpen {
     k: i32,
-    /// `blend[v * 256 + s]`: the rounded weighted sum of original `v` and sharpened `s`.
-    blend: Vec<u8>,
+    /// The weight of the original, in tenths.
+    w10: i32,
 }
 
 /// Registry constructor of C-D4.
 pub const SHARPEN_BUILDER: CameraBuilder = |s| {
     let (k, w) = SHARPEN[s.level()];
-    let blend = (0..256 * 256)
-        .map(|i| {
-            let (v, s) = ((i / 256) as f64, (i % 256) as f64);
-            (w * v + (1.0 - w) * s).round_ties_even().clamp(0.0, 255.0) as u8
-        })
-        .collect();
-    Ok(Box::new(Sharpen { k, blend }))
+    Ok(Box::new(Sharpen {
+        k,
+        w10: (w * 10.0).round() as i32,
+    }))
 };
 
 impl CameraPerturbation for Sharpen {
@@ -295,50 +294,47 @@ impl CameraPerturbation for Sharpen {
         let row_len = w * c;
         par_rows(input, output, |y, src, dst| {
             let rows = [-1i64, 0, 1].map(|d| input.row(reflect101(y as i64 + d, h)));
-            // Vertical sums of the three rows, then horizontal sums of three columns.
+            // Vertical sums of the three rows, then 3x3 box sums along the row.
             let col: Vec<i16> = rows[0][..row_len]
                 .iter()
                 .zip(&rows[1][..row_len])
                 .zip(&rows[2][..row_len])
                 .map(|((a, b), d)| *a as i16 + *b as i16 + *d as i16)
                 .collect();
-            match c {
-                1 => sharpen_row::<1>(&col, src, dst, centre, &self.blend),
-                3 => sharpen_row::<3>(&col, src, dst, centre, &self.blend),
-                _ => sharpen_row::<4>(&col, src, dst, centre, &self.blend),
+            let mut boxes = vec![0i16; row_len];
+            box_sums(&col, &mut boxes, c);
+            for ((d, &v), &b) in dst.iter_mut().zip(&src[..row_len]).zip(&boxes) {
+                let v = v as i32;
+                let s = (centre * v - b as i32).clamp(0, 255);
+                let n = self.w10 * v + (10 - self.w10) * s;
+                let (q, r) = (n / 10, n % 10);
+                *d = (q + (r > 5 || (r == 5 && q & 1 == 1)) as i32) as u8;
             }
             copy_alpha(format, src, dst);
         });
     }
 }
 
-/// One row of [`Sharpen`] for `C` channels, from the row's vertical 3-sums `col`.
-fn sharpen_row<const C: usize>(col: &[i16], src: &[u8], dst: &mut [u8], centre: i32, blend: &[u8]) {
-    let w = col.len() / C;
-    let px = |x: usize, l: usize, r: usize, dst: &mut [u8]| {
-        for ch in 0..C {
-            let box_sum = col[l * C + ch] as i32 + col[x * C + ch] as i32 + col[r * C + ch] as i32;
-            let v = src[x * C + ch] as i32;
-            let s = (centre * v - box_sum).clamp(0, 255) as usize;
-            dst[x * C + ch] = blend[v as usize * 256 + s];
+/// Sums of three horizontally adjacent samples of a row of `c`-channel pixels (`col`), with
+/// reflect-101 borders, into `out`.
+fn box_sums(col: &[i16], out: &mut [i16], c: usize) {
+    let w = col.len() / c;
+    let at = |x: usize, ch: usize| col[x * c + ch];
+    for x in [0, w - 1] {
+        for ch in 0..c {
+            let (l, r) = (reflect101(x as i64 - 1, w), reflect101(x as i64 + 1, w));
+            out[x * c + ch] = at(l, ch) + at(x, ch) + at(r, ch);
         }
-    };
-    if w < 3 {
-        for x in 0..w {
-            px(
-                x,
-                reflect101(x as i64 - 1, w),
-                reflect101(x as i64 + 1, w),
-                dst,
-            );
+    }
+    if w > 2 {
+        for ((o, a), (b, d)) in out[c..(w - 1) * c]
+            .iter_mut()
+            .zip(&col[..(w - 2) * c])
+            .zip(col[c..(w - 1) * c].iter().zip(&col[2 * c..]))
+        {
+            *o = a + b + d;
         }
-        return;
     }
-    px(0, 1, 1, dst);
-    for x in 1..w - 1 {
-        px(x, x - 1, x + 1, dst);
-    }
-    px(w - 1, w - 2, w - 2, dst);
 }
 
 #[cfg(test)]
