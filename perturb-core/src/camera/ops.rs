@@ -385,24 +385,41 @@ where
 /// distance below `V` is scaled by `S' / S`. Gray pixels stay gray. Mono8 is copied (it has no
 /// saturation); callers refuse it where that makes the perturbation a no-op.
 pub fn map_saturation(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, smap: &[u8; 256]) {
+    let map = SaturationMap::new(smap);
     let format = input.format;
-    let c = format.channels();
-    let rgb = format.rgb_offsets();
-    let recip = reciprocals();
-    // Per saturation S: the factor S' / S in 32.32 fixed point.
-    let mut gain = [0i64; 256];
-    for (s, g) in gain.iter_mut().enumerate().skip(1) {
-        *g = smap[s] as i64 * recip[s] as i64;
-    }
-    par_rows(input, output, |_, src, dst| match c {
-        _ if format.is_mono() => dst.copy_from_slice(src),
-        3 => saturation_row::<3>(src, dst, rgb, &recip, &gain),
-        4 => {
-            saturation_row::<4>(src, dst, rgb, &recip, &gain);
-            copy_alpha(format, src, dst);
+    par_rows(input, output, |_, src, dst| map.row(format, src, dst));
+}
+
+/// The saturation mapping of [`map_saturation`] prepared for use row by row.
+pub struct SaturationMap {
+    /// Per saturation S: the factor S' / S in 32.32 fixed point.
+    gain: [i64; 256],
+}
+
+impl SaturationMap {
+    /// Prepares the mapping `S -> smap[S]` of the HSV saturation.
+    pub fn new(smap: &[u8; 256]) -> Self {
+        let recip = reciprocals();
+        let mut gain = [0i64; 256];
+        for (s, g) in gain.iter_mut().enumerate().skip(1) {
+            *g = smap[s] as i64 * recip[s] as i64;
         }
-        _ => unreachable!("colour formats have 3 or 4 channels"),
-    });
+        SaturationMap { gain }
+    }
+
+    /// Maps one row of `format` pixels from `src` into `dst` (mono8 is copied, alpha is copied).
+    pub fn row(&self, format: PixelFormat, src: &[u8], dst: &mut [u8]) {
+        let rgb = format.rgb_offsets();
+        match format.channels() {
+            _ if format.is_mono() => dst.copy_from_slice(src),
+            3 => saturation_row::<3>(src, dst, rgb, reciprocals(), &self.gain),
+            4 => {
+                saturation_row::<4>(src, dst, rgb, reciprocals(), &self.gain);
+                copy_alpha(format, src, dst);
+            }
+            _ => unreachable!("colour formats have 3 or 4 channels"),
+        }
+    }
 }
 
 /// One row of [`map_saturation`] for pixels of `C` bytes with colour bytes at `rgb`.

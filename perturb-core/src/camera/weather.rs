@@ -1,10 +1,10 @@
 //! Weather and illumination family (C-C): frost, snow, fog, brightness, contrast and the animated
 //! overlays (rain, raindrops, lightning, smoke, sun glare, snowflakes).
 
-use super::ops::{apply_lut, map_saturation, map_value, par_rows};
+use super::ops::{SaturationMap, apply_lut, copy_alpha, map_value, par_rows};
 use super::texture::{fbm, size_scale, value_noise};
 use super::{CameraBuilder, CameraPerturbation};
-use crate::image::{ImageView, ImageViewMut};
+use crate::image::{ImageView, ImageViewMut, PixelFormat};
 use crate::rng::Rng;
 use rayon::prelude::*;
 
@@ -76,34 +76,33 @@ impl CameraPerturbation for Contrast {
 /// severities 1..5: the references' `out = (1 - i) I + i O` wherever the effect is present.
 pub const OVERLAY_WEIGHT: [f32; 5] = [0.15, 0.25, 0.40, 0.60, 0.85];
 
-/// Blends a full-frame texture: `out = (1 - i) I + i T` per colour channel (8.8 fixed point).
-fn blend_texture(
-    input: &ImageView<'_>,
-    output: &mut ImageViewMut<'_>,
-    texture: &[[u8; 3]],
-    weight: f32,
-) {
-    let format = input.format;
-    let c = format.channels();
+/// Blends one row of a full-frame texture: `out = (1 - i) I + i T` per colour channel, with `t` the
+/// weight `i` in 8.8 fixed point; alpha is copied.
+fn blend_texture_row(format: PixelFormat, src: &[u8], tex: &[[u8; 3]], t: u32, dst: &mut [u8]) {
+    let mix = |p: u8, v: u8| ((p as u32 * (256 - t) + v as u32 * t + 128) >> 8) as u8;
     let [ri, gi, bi] = format.rgb_offsets();
-    let w = input.width as usize;
-    let t = (weight * 256.0).round() as u32;
-    par_rows(input, output, |y, src, dst| {
-        let row = &texture[y * w..(y + 1) * w];
-        for ((p, q), tex) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)).zip(row) {
-            if format.is_mono() {
-                let l = crate::image::luma(tex[0], tex[1], tex[2]) as u32;
-                q[0] = ((p[0] as u32 * (256 - t) + l * t + 128) >> 8) as u8;
-                continue;
-            }
-            for (ch, v) in [(ri, tex[0]), (gi, tex[1]), (bi, tex[2])] {
-                q[ch] = ((p[ch] as u32 * (256 - t) + v as u32 * t + 128) >> 8) as u8;
-            }
-            if let Some(a) = format.alpha_offset() {
-                q[a] = p[a];
+    match format.channels() {
+        _ if format.is_mono() => {
+            for ((p, q), tex) in src.iter().zip(dst.iter_mut()).zip(tex) {
+                *q = mix(*p, crate::image::luma(tex[0], tex[1], tex[2]));
             }
         }
-    });
+        3 => {
+            for ((p, q), tex) in src.chunks_exact(3).zip(dst.chunks_exact_mut(3)).zip(tex) {
+                q[ri] = mix(p[ri], tex[0]);
+                q[gi] = mix(p[gi], tex[1]);
+                q[bi] = mix(p[bi], tex[2]);
+            }
+        }
+        _ => {
+            for ((p, q), tex) in src.chunks_exact(4).zip(dst.chunks_exact_mut(4)).zip(tex) {
+                q[ri] = mix(p[ri], tex[0]);
+                q[gi] = mix(p[gi], tex[1]);
+                q[bi] = mix(p[bi], tex[2]);
+            }
+            copy_alpha(format, src, dst);
+        }
+    }
 }
 
 /// C-C1 frost: blend weight of the frost texture, severities 1..5 (PerturbationDrive
@@ -267,12 +266,21 @@ pub const SNOW: CameraBuilder = |s| {
 
 impl CameraPerturbation for TextureOverlay {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
-        blend_texture(input, output, &self.texture, self.weight);
-        if !input.format.is_mono() {
-            let blended = output.as_view();
-            let copy = crate::image::Image::from_view(&blended);
-            map_saturation(&copy.view(), output, &self.desaturate);
-        }
+        // Blend the texture, then scale the saturation down (colour formats), row by row.
+        let format = input.format;
+        let w = input.width as usize;
+        let t = (self.weight * 256.0).round() as u32;
+        let desaturate = SaturationMap::new(&self.desaturate);
+        par_rows(input, output, |y, src, dst| {
+            let tex = &self.texture[y * w..(y + 1) * w];
+            if format.is_mono() {
+                blend_texture_row(format, src, tex, t, dst);
+            } else {
+                let mut blended = vec![0u8; dst.len()];
+                blend_texture_row(format, src, tex, t, &mut blended);
+                desaturate.row(format, &blended, dst);
+            }
+        });
     }
 }
 
@@ -385,7 +393,11 @@ pub const FOG: CameraBuilder = |s| {
 
 impl CameraPerturbation for Fog {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
-        blend_texture(input, output, &self.texture, self.weight);
+        let (format, w) = (input.format, input.width as usize);
+        let t = (self.weight * 256.0).round() as u32;
+        par_rows(input, output, |y, src, dst| {
+            blend_texture_row(format, src, &self.texture[y * w..(y + 1) * w], t, dst)
+        });
     }
 }
 
