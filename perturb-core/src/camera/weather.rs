@@ -961,10 +961,36 @@ impl CameraPerturbation for SunGlare {
         let table = &self.radial;
         let unit2 = (core / 64.0) * (core / 64.0);
         let streak_h = 0.02 * h;
+        // The streak's horizontal falloff, per column.
+        let falloff: Vec<f32> = (0..input.width)
+            .map(|x| (-((x as f32 - sx).abs() / w) * 1.5).exp())
+            .collect();
+        // Beyond this many pixels from the sun the radial table is 0.
+        let reach = (table.len() as f32 * unit2).sqrt().ceil() + 1.0;
         par_rows(input, output, |y, src, dst| {
             let dy = y as f32 - sy;
             let streak_v = (-(dy * dy) / (2.0 * streak_h * streak_h)).exp();
-            for (x, (p, q)) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)).enumerate() {
+            // Where neither the streak nor the radial profile reaches, coverage rounds to 0.
+            let streak_off = streak_v * 0.9 * wgt * 256.0 < 1.0;
+            let (x0, x1) = if !streak_off {
+                (0, input.width as usize)
+            } else if dy.abs() >= reach {
+                (0, 0)
+            } else {
+                (
+                    (sx - reach).floor().max(0.0) as usize,
+                    ((sx + reach).ceil().max(0.0) as usize).min(input.width as usize),
+                )
+            };
+            let x1 = x1.max(x0);
+            dst[..x0 * c].copy_from_slice(&src[..x0 * c]);
+            dst[x1 * c..].copy_from_slice(&src[x1 * c..]);
+            for (x, (p, q)) in src[x0 * c..x1 * c]
+                .chunks_exact(c)
+                .zip(dst[x0 * c..x1 * c].chunks_exact_mut(c))
+                .enumerate()
+            {
+                let x = x + x0;
                 let dx = x as f32 - sx;
                 let d2 = (dx * dx + dy * dy) / unit2;
                 let mut a = if (d2 as usize) < table.len() {
@@ -972,7 +998,7 @@ impl CameraPerturbation for SunGlare {
                 } else {
                     0.0
                 };
-                a = a.max(streak_v * 0.9 * (-(dx.abs() / w) * 1.5).exp());
+                a = a.max(streak_v * 0.9 * falloff[x]);
                 let t = (a * wgt * 256.0) as u32;
                 if t == 0 {
                     q.copy_from_slice(p);
