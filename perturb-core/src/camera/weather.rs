@@ -409,16 +409,26 @@ fn blend_px(out: &mut ImageViewMut<'_>, x: i64, y: i64, rgb: [f32; 3], a: f32) {
     }
     let f = out.format;
     let c = f.channels();
-    let [ri, gi, bi] = f.rgb_offsets();
     let row = out.row_mut(y as usize);
-    let p = &mut row[x as usize * c..x as usize * c + c];
-    let a = a.min(1.0);
-    if f.is_mono() {
+    blend_into(
+        f,
+        f.rgb_offsets(),
+        &mut row[x as usize * c..x as usize * c + c],
+        rgb,
+        a.min(1.0),
+    );
+}
+
+/// Blends `rgb` into the pixel bytes `p` of `format` (colour bytes at `rgb_at`) with coverage `a`
+/// (0..=1), alpha untouched.
+#[inline]
+fn blend_into(format: PixelFormat, rgb_at: [usize; 3], p: &mut [u8], rgb: [f32; 3], a: f32) {
+    if format.is_mono() {
         let l = 0.299 * rgb[0] + 0.587 * rgb[1] + 0.114 * rgb[2];
         p[0] = (p[0] as f32 * (1.0 - a) + l * a + 0.5) as u8;
         return;
     }
-    for (ch, v) in [(ri, rgb[0]), (gi, rgb[1]), (bi, rgb[2])] {
+    for (ch, v) in rgb_at.into_iter().zip(rgb) {
         p[ch] = (p[ch] as f32 * (1.0 - a) + v * a + 0.5) as u8;
     }
 }
@@ -724,7 +734,6 @@ fn bolt(rng: &mut Rng, a: (f32, f32), b: (f32, f32), amp: f32, levels: u32) -> V
 
 impl CameraPerturbation for Lightning {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        copy_frame(input, output);
         let (w, h) = (input.width as f32, input.height as f32);
         let k = size_scale(input.width, input.height).max(0.05);
         let strike = seq / STRIKE_FRAMES;
@@ -758,19 +767,36 @@ impl CameraPerturbation for Lightning {
         if flash > 0.0 {
             // The sky lights up: every colour channel moves towards a pale white.
             let t = (flash * 256.0) as u32;
-            let f = input.format;
-            let c = f.channels();
-            for y in 0..input.height as usize {
-                for px in output.row_mut(y).chunks_exact_mut(c) {
-                    for (ch, v) in px.iter_mut().enumerate() {
-                        if f.alpha_offset() != Some(ch) {
-                            *v = ((*v as u32 * (256 - t) + 235 * t) >> 8) as u8;
-                        }
-                    }
-                }
-            }
+            let lut = std::array::from_fn(|v| ((v as u32 * (256 - t) + 235 * t) >> 8) as u8);
+            apply_lut(input, output, &lut);
+        } else {
+            copy_frame(input, output);
         }
         let (core, glow) = ((1.5 * k).max(1.0), 10.0 * k);
+        // The stamp drawn along the paths: per row offset, the (dx, coverage, is-core) of the
+        // pixels it covers by more than 1%.
+        let rr = glow.ceil() as i64;
+        let stamp: Vec<(i64, Vec<(i64, f32, bool)>)> = (-rr..=rr)
+            .map(|dy| {
+                let row = (-rr..=rr)
+                    .filter_map(|dx| {
+                        let d = ((dx * dx + dy * dy) as f32).sqrt();
+                        let (cov, is_core) = if d <= core {
+                            (1.0, true)
+                        } else {
+                            let g = (-(d - core).powi(2) / (2.0 * (glow / 2.5).powi(2))).exp() * 0.12;
+                            (g, false)
+                        };
+                        (cov > 0.01).then_some((dx, cov, is_core))
+                    })
+                    .collect();
+                (dy, row)
+            })
+            .collect();
+        let (iw, ih) = (input.width as i64, input.height as i64);
+        let f = output.format;
+        let c = f.channels();
+        let [ri, gi, bi] = f.rgb_offsets();
         for (pi, path) in paths.iter().enumerate() {
             let strength = if pi == 0 { 1.0 } else { 0.7 };
             for seg in path.windows(2) {
@@ -779,27 +805,29 @@ impl CameraPerturbation for Lightning {
                 let steps = (len / (core * 0.7)).ceil().max(1.0) as usize;
                 for sidx in 0..=steps {
                     let t = sidx as f32 / steps as f32;
-                    let (cx, cy) = (p.0 + (q.0 - p.0) * t, p.1 + (q.1 - p.1) * t);
-                    let rr = glow.ceil() as i64;
-                    for dy in -rr..=rr {
-                        for dx in -rr..=rr {
-                            let d = ((dx * dx + dy * dy) as f32).sqrt();
-                            let (cov, colour) = if d <= core {
-                                (1.0, [245.0, 240.0, 255.0])
-                            } else {
-                                let g = (-(d - core).powi(2) / (2.0 * (glow / 2.5).powi(2))).exp()
-                                    * 0.12;
-                                (g, [180.0, 170.0, 255.0])
-                            };
-                            if cov > 0.01 {
-                                blend_px(
-                                    output,
-                                    cx as i64 + dx,
-                                    cy as i64 + dy,
-                                    colour,
-                                    a * cov * strength,
-                                );
+                    let (cx, cy) = (
+                        (p.0 + (q.0 - p.0) * t) as i64,
+                        (p.1 + (q.1 - p.1) * t) as i64,
+                    );
+                    for (dy, pixels) in &stamp {
+                        let y = cy + dy;
+                        if y < 0 || y >= ih {
+                            continue;
+                        }
+                        let row = output.row_mut(y as usize);
+                        for &(dx, cov, is_core) in pixels {
+                            let x = cx + dx;
+                            let alpha = (a * cov * strength).min(1.0);
+                            if x < 0 || x >= iw || alpha <= 0.0 {
+                                continue;
                             }
+                            let colour = if is_core {
+                                [245.0, 240.0, 255.0]
+                            } else {
+                                [180.0, 170.0, 255.0]
+                            };
+                            let px = &mut row[x as usize * c..x as usize * c + c];
+                            blend_into(f, [ri, gi, bi], px, colour, alpha);
                         }
                     }
                 }
