@@ -517,9 +517,16 @@ pub const SNOWFLAKES: [usize; 5] = [200, 300, 400, 500, 600];
 /// is `(d0 + v n) mod R` (R the half-diagonal), so the population is stationary and any frame is
 /// computed from (seed, n) alone. Counts scale with the frame area from the reference's 100 (s + 1) at its size;
 /// the reference renders each flake with its raindrop code at radius 1-3 and takes 70-460 ms per
-/// frame, here a flake is a soft disc drawn directly.
+/// frame, here a flake is a soft disc drawn directly. All flakes have one colour, so compositing
+/// them one over the other is `out = c + (I - c) T` with `T` the product of `1 - a` over the flakes
+/// covering a pixel: the flakes only multiply into a transmittance plane, and the frame is blended
+/// once (one rounding instead of one per flake).
 pub struct Snowflakes {
     flakes: Vec<(f32, f32, f32, f32, f32)>,
+    /// Distances from the centre of a `(2 m + 1)^2` square, row-major.
+    dist: Vec<f32>,
+    /// Half-size of the largest flake's square.
+    m: i64,
 }
 
 /// Registry constructor of C-C12.
@@ -537,36 +544,76 @@ pub const SNOWFLAKES_BUILDER: CameraBuilder = |s| {
             let radius = (1.5 + rng.f32() * 2.5) * k;
             (angle, d0, speed, 0.0, radius)
         })
+        .collect::<Vec<_>>();
+    // A flake's radius at most doubles on its way out.
+    let m = flakes.iter().map(|f| f.4 * 2.0).fold(0.0, f32::max).ceil() as i64 + 1;
+    let dist = (-m..=m)
+        .flat_map(|dy| (-m..=m).map(move |dx| ((dx * dx + dy * dy) as f32).sqrt()))
         .collect();
-    Ok(Box::new(Snowflakes { flakes }))
+    Ok(Box::new(Snowflakes { flakes, dist, m }))
 };
 
 impl CameraPerturbation for Snowflakes {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        copy_frame(input, output);
-        let (w, h) = (input.width as f32, input.height as f32);
+        let (wi, hi) = (input.width as usize, input.height as usize);
+        let (w, h) = (wi as f32, hi as f32);
         let (cx, cy) = (w / 2.0, h / 2.0);
         let reach = (w * w + h * h).sqrt() / 2.0;
-        for &(angle, d0, speed, _, radius) in &self.flakes {
-            let d = (d0 + speed * (seq % 1_000_000) as f32).rem_euclid(reach);
-            let (x, y) = (cx + angle.cos() * d, cy + angle.sin() * d);
-            // Flakes grow as they come closer.
-            let r = radius * (1.0 + d / reach);
-            let ri = r.ceil() as i64 + 1;
-            for dy in -ri..=ri {
-                for dx in -ri..=ri {
-                    let dist = ((dx * dx + dy * dy) as f32).sqrt();
-                    let a = (1.0 - dist / (r + 0.5)).clamp(0.0, 1.0);
-                    blend_px(
-                        output,
-                        x as i64 + dx,
-                        y as i64 + dy,
-                        [250.0, 250.0, 252.0],
-                        a * 0.95,
-                    );
+        let (m, side) = (self.m, 2 * self.m as usize + 1);
+        let mut trans = vec![1f32; wi * hi];
+        // Where each flake is at this frame: centre pixel and radius. Drawn top to bottom so the
+        // transmittance plane is walked nearly in order (the product does not depend on the order).
+        let mut placed: Vec<(i64, i64, f32)> = self
+            .flakes
+            .iter()
+            .map(|&(angle, d0, speed, _, radius)| {
+                let d = (d0 + speed * (seq % 1_000_000) as f32).rem_euclid(reach);
+                let (x, y) = (cx + angle.cos() * d, cy + angle.sin() * d);
+                // Flakes grow as they come closer.
+                (y as i64, x as i64, radius * (1.0 + d / reach))
+            })
+            .collect();
+        placed.sort_unstable_by_key(|&(y, x, _)| (y, x));
+        for (yc, xc, r) in placed {
+            let ri = (r.ceil() as i64 + 1).min(m);
+            let inv = 1.0 / (r + 0.5);
+            let (x0, x1) = ((xc - ri).max(0), (xc + ri).min(wi as i64 - 1));
+            if x0 > x1 {
+                continue;
+            }
+            for yy in (yc - ri).max(0)..=(yc + ri).min(hi as i64 - 1) {
+                let drow = (yy - yc + m) as usize * side;
+                let dists = &self.dist[drow + (x0 - xc + m) as usize..=drow + (x1 - xc + m) as usize];
+                let start = yy as usize * wi;
+                let ts = &mut trans[start + x0 as usize..=start + x1 as usize];
+                for (t, &dd) in ts.iter_mut().zip(dists) {
+                    let a = (1.0 - dd * inv).clamp(0.0, 1.0) * 0.95;
+                    *t *= 1.0 - a;
                 }
             }
         }
+        let format = input.format;
+        let c = format.channels();
+        let colour = if format.is_mono() {
+            [0.299 * 250.0 + 0.587 * 250.0 + 0.114 * 252.0; 3]
+        } else {
+            [250.0, 250.0, 252.0]
+        };
+        let mut at = [0usize; 3];
+        if !format.is_mono() {
+            at = format.rgb_offsets();
+        }
+        par_rows(input, output, |y, src, dst| {
+            dst.copy_from_slice(src);
+            let ts = &trans[y * wi..(y + 1) * wi];
+            for (q, &t) in dst.chunks_exact_mut(c).zip(ts) {
+                if t < 1.0 {
+                    for (&ch, v) in at.iter().zip(colour) {
+                        q[ch] = (v + (q[ch] as f32 - v) * t + 0.5) as u8;
+                    }
+                }
+            }
+        });
     }
 }
 
