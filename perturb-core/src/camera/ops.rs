@@ -67,6 +67,10 @@ pub fn gaussian_kernel(k: usize, sigma: f64) -> Vec<f32> {
 /// Reflect-101 border index (OpenCV's default): ... 2 1 | 0 1 2 ... n-1 | n-2 ...
 #[inline]
 pub fn reflect101(i: i64, n: usize) -> usize {
+    // The common case first: no division.
+    if i >= 0 && (i as usize) < n {
+        return i as usize;
+    }
     if n == 1 {
         return 0;
     }
