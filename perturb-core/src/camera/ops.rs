@@ -491,27 +491,38 @@ impl FloatImage {
         let (w, h, c) = (v.width as usize, v.height as usize, v.format.channels());
         let (pw, ph) = (w + 2 * pad, h + 2 * pad);
         let (w2, h2) = (pw.div_ceil(f), ph.div_ceil(f));
-        let xmap: Vec<usize> = (0..pw)
-            .map(|x| reflect101(x as i64 - pad as i64, w) * c)
+        // Source pixel of each padded column in the reflected borders.
+        let border: Vec<(usize, usize)> = (0..pad)
+            .chain(pad + w..pw)
+            .map(|x| (x * c, reflect101(x as i64 - pad as i64, w) * c))
             .collect();
         let mut data = vec![0f32; w2 * h2 * c];
         data.par_chunks_mut((w2 * c).max(1))
             .enumerate()
             .for_each(|(y2, row)| {
+                // Column sums of the f padded rows of this block, then sums of f columns.
                 let ys = y2 * f..((y2 + 1) * f).min(ph);
                 let ny = ys.len();
+                let mut acc = vec![0f32; pw * c];
                 for y in ys {
                     let src = v.row(reflect101(y as i64 - pad as i64, h));
-                    for (x2, out) in row.chunks_exact_mut(c).enumerate() {
-                        for &sx in &xmap[x2 * f..((x2 + 1) * f).min(pw)] {
-                            for (o, s) in out.iter_mut().zip(&src[sx..sx + c]) {
-                                *o += *s as f32;
-                            }
+                    for (a, s) in acc[pad * c..(pad + w) * c].iter_mut().zip(src) {
+                        *a += *s as f32;
+                    }
+                    for &(d, sx) in &border {
+                        for ch in 0..c {
+                            acc[d + ch] += src[sx + ch] as f32;
                         }
                     }
                 }
                 for (x2, out) in row.chunks_exact_mut(c).enumerate() {
-                    let n = (ny * (((x2 + 1) * f).min(pw) - x2 * f)) as f32;
+                    let xs = x2 * f..((x2 + 1) * f).min(pw);
+                    let n = (ny * xs.len()) as f32;
+                    for x in xs {
+                        for (o, a) in out.iter_mut().zip(&acc[x * c..x * c + c]) {
+                            *o += a;
+                        }
+                    }
                     for o in out {
                         *o /= n;
                     }
@@ -569,9 +580,10 @@ impl FloatImage {
             .for_each(|(y, dst)| {
                 let src = self.row(y);
                 let mut padded = vec![0f32; (w + 2 * r) * c];
-                for (px, chunk) in padded.chunks_exact_mut(c).enumerate() {
+                padded[r * c..(r + w) * c].copy_from_slice(src);
+                for px in (0..r).chain(r + w..w + 2 * r) {
                     let sx = reflect101(px as i64 - r as i64, w);
-                    chunk.copy_from_slice(&src[sx * c..sx * c + c]);
+                    padded[px * c..px * c + c].copy_from_slice(&src[sx * c..sx * c + c]);
                 }
                 for (t, &kw) in kernel.iter().enumerate() {
                     for (d, s) in dst.iter_mut().zip(&padded[t * c..t * c + row_len]) {
@@ -615,89 +627,140 @@ impl FloatImage {
             data,
         }
     }
+}
 
-    /// Bilinear upsampling by an integer factor (pixel centres aligned) of the region starting at
-    /// full-resolution pixel (`off`, `off`) and `w` x `h` pixels large, calling `emit(y, row)` with
-    /// each full-resolution row.
-    pub fn upsample_rows(
-        &self,
-        f: usize,
-        off: usize,
-        w: usize,
-        h: usize,
-        emit: impl Fn(usize, &[f32]) + Sync,
-    ) {
-        let c = self.c;
+/// Linear interpolation along a row of `C`-channel pixels: output pixel i is `(1 - t) vrow[x0] +
+/// t vrow[x1]` for `(x0, x1, t) = xmap[i]`.
+#[inline(always)]
+fn lerp_row<const C: usize>(vrow: &[f32], xmap: &[(usize, usize, f32)], row: &mut [f32]) {
+    for (out, &(x0, x1, wx)) in row.chunks_exact_mut(C).zip(xmap) {
+        let p0: &[f32; C] = vrow[x0 * C..x0 * C + C].try_into().expect("C samples");
+        let p1: &[f32; C] = vrow[x1 * C..x1 * C + C].try_into().expect("C samples");
+        for ch in 0..C {
+            out[ch] = p0[ch] + (p1[ch] - p0[ch]) * wx;
+        }
+    }
+}
+
+/// The resolution divisor [`GaussianRows`] works at for `sigma` on a `w` x `h` frame.
+fn gaussian_factor(sigma: f64, w: usize, h: usize) -> usize {
+    // The largest power of two (up to 8) that leaves a Gaussian of at least 1.5 reduced pixels to
+    // apply at the reduced resolution: narrower ones are not smooth enough for the bilinear
+    // upsampling to follow them within a level or two.
+    let mut f = 1;
+    while f < 8 && w >= 64 * f && h >= 64 * f && reduced_sigma(sigma, f * 2) >= 1.5 {
+        f *= 2;
+    }
+    f
+}
+
+/// The sigma, in reduced pixels, that remains to apply after box-downsampling by `f` so that
+/// downsampling, the Gaussian and bilinear upsampling together have the variance of `sigma`.
+fn reduced_sigma(sigma: f64, f: usize) -> f64 {
+    let ff = (f * f) as f64;
+    ((sigma * sigma - (ff - 1.0) / 12.0 - ff / 6.0) / ff)
+        .max(0.0)
+        .sqrt()
+}
+
+/// A Gaussian blur of `input` as `cv2.GaussianBlur(k x k, sigma)`, read row by row (f32,
+/// interleaved, alpha blurred too) with [`GaussianRows::row`], from any thread. Kernels below sigma
+/// 3.15 are applied exactly (separable, reflect-101 borders). Wider ones are computed at a reduced
+/// resolution (half up to sigma 6.3, quarter up to 12.6, an eighth beyond): box downsampling, an
+/// exact Gaussian of the remaining width (the variance of the box and of the bilinear upsampling
+/// subtracted, at least 1.5 reduced pixels), bilinear upsampling. On real frames this differs from
+/// the exact kernel by about a quarter of a level on average (see the test), at a fraction of the
+/// cost: the references' k = 41 and k = 113 kernels are what makes them slow.
+pub struct GaussianRows {
+    /// The blurred rows: at full resolution, or (reduced) the working resolution's rows already
+    /// interpolated horizontally to full width, so that a full-resolution row is one lerp of two.
+    rows: FloatImage,
+    /// Vertical taps into `rows` when reduced: (first, second, weight of the second).
+    ymap: Vec<(usize, usize, f32)>,
+}
+
+impl GaussianRows {
+    /// Blurs `input` with a `k x k` Gaussian of `sigma` (OpenCV's sigma for k when 0).
+    pub fn new(input: &ImageView<'_>, k: usize, sigma: f64) -> Self {
+        let sigma = if sigma > 0.0 { sigma } else { opencv_sigma(k) };
+        let (w, h, c) = (
+            input.width as usize,
+            input.height as usize,
+            input.format.channels(),
+        );
+        let f = gaussian_factor(sigma, w, h);
+        if f == 1 {
+            let rows = FloatImage::from_view(input).convolve(&gaussian_kernel(k.max(1) | 1, sigma));
+            return GaussianRows {
+                rows,
+                ymap: Vec::new(),
+            };
+        }
+        let s2 = reduced_sigma(sigma, f);
+        let k2 = (2.0 * (3.0 * s2).ceil() + 1.0) as usize;
+        // Pad at full resolution (a multiple of f, wider than the kernel) so the borders reflect
+        // exactly as the full-resolution filter does; crop when upsampling.
+        let pad = ((3.0 * sigma).ceil() as usize).div_ceil(f) * f + f;
+        let small = FloatImage::downsample_padded(input, pad, f).convolve(&gaussian_kernel(k2, s2));
+        // Bilinear taps with pixel centres aligned, offset by the padding.
         let map = |i: usize, n: usize| {
-            let p = (((i + off) as f32 + 0.5) / f as f32 - 0.5).max(0.0);
+            let p = (((i + pad) as f32 + 0.5) / f as f32 - 0.5).max(0.0);
             let i0 = (p as usize).min(n - 1);
             (i0, (i0 + 1).min(n - 1), p - i0 as f32)
         };
-        let xmap: Vec<(usize, usize, f32)> = (0..w).map(|x| map(x, self.w)).collect();
-        (0..h).into_par_iter().with_min_len(8).for_each(|y| {
-            let (y0, y1, wy) = map(y, self.h);
-            let (r0, r1) = (self.row(y0), self.row(y1));
-            // Vertical interpolation at low resolution first, then one horizontal lerp per
-            // output sample (bilinear interpolation is separable).
-            let vrow: Vec<f32> = r0.iter().zip(r1).map(|(a, b)| a + (b - a) * wy).collect();
-            let mut row = vec![0f32; w * c];
-            for (out, &(x0, x1, wx)) in row.chunks_exact_mut(c).zip(&xmap) {
-                let (p0, p1) = (&vrow[x0 * c..x0 * c + c], &vrow[x1 * c..x1 * c + c]);
-                for ((o, a), b) in out.iter_mut().zip(p0).zip(p1) {
-                    *o = a + (b - a) * wx;
+        let xmap: Vec<(usize, usize, f32)> = (0..w).map(|x| map(x, small.w)).collect();
+        let ymap: Vec<(usize, usize, f32)> = (0..h).map(|y| map(y, small.h)).collect();
+        // Horizontal interpolation once per working row (bilinear interpolation is separable):
+        // only the rows the vertical taps reach.
+        let first = ymap.first().map_or(0, |t| t.0);
+        let last = ymap.last().map_or(0, |t| t.1);
+        let mut data = vec![0f32; (last + 1 - first) * w * c];
+        data.par_chunks_mut((w * c).max(1))
+            .enumerate()
+            .for_each(|(i, out)| {
+                let src = small.row(first + i);
+                match c {
+                    1 => lerp_row::<1>(src, &xmap, out),
+                    3 => lerp_row::<3>(src, &xmap, out),
+                    _ => lerp_row::<4>(src, &xmap, out),
                 }
-            }
-            emit(y, &row);
-        });
+            });
+        GaussianRows {
+            rows: FloatImage {
+                w,
+                h: last + 1 - first,
+                c,
+                data,
+            },
+            ymap: ymap
+                .into_iter()
+                .map(|(a, b, t)| (a - first, b - first, t))
+                .collect(),
+        }
+    }
+
+    /// Writes blurred row `y` (`w * c` samples) into `out`.
+    pub fn row(&self, y: usize, out: &mut [f32]) {
+        if self.ymap.is_empty() {
+            out.copy_from_slice(self.rows.row(y));
+            return;
+        }
+        let (y0, y1, wy) = self.ymap[y];
+        for ((o, a), b) in out.iter_mut().zip(self.rows.row(y0)).zip(self.rows.row(y1)) {
+            *o = a + (b - a) * wy;
+        }
     }
 }
 
-/// The resolution divisor [`gaussian_rows`] works at for `sigma` on a `w` x `h` frame.
-fn gaussian_factor(sigma: f64, w: usize, h: usize) -> usize {
-    if sigma < 3.5 || w < 64 || h < 64 {
-        1
-    } else if sigma < 8.0 {
-        2
-    } else {
-        4
+/// Rounds non-negative samples to u8 (saturating at 255).
+#[inline]
+pub fn round_u8(src: &[f32], dst: &mut [u8]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d = ((s + 0.5) as i32).clamp(0, 255) as u8;
     }
 }
 
-/// A Gaussian blur of `input` as `cv2.GaussianBlur(k x k, sigma)`: calls `emit(y, row)` with each
-/// blurred row (f32, interleaved, alpha blurred too). Kernels up to sigma 3.5 are applied exactly
-/// (separable, reflect-101 borders). Wider ones are computed at half (sigma < 8) or quarter
-/// resolution: box downsampling, an exact Gaussian of the remaining width (the variance of the box
-/// and of the bilinear upsampling subtracted), bilinear upsampling. On real frames this differs from
-/// the exact kernel by well under one level on average (see the test), at a fraction of the cost:
-/// the references' k = 41 and k = 113 kernels are what makes them slow.
-pub fn gaussian_rows(
-    input: &ImageView<'_>,
-    k: usize,
-    sigma: f64,
-    emit: impl Fn(usize, &[f32]) + Sync,
-) {
-    let sigma = if sigma > 0.0 { sigma } else { opencv_sigma(k) };
-    let (w, h) = (input.width as usize, input.height as usize);
-    let f = gaussian_factor(sigma, w, h);
-    if f == 1 {
-        let img = FloatImage::from_view(input);
-        let kk = k.max(1) | 1;
-        let out = img.convolve(&gaussian_kernel(kk, sigma));
-        (0..h).into_par_iter().for_each(|y| emit(y, out.row(y)));
-        return;
-    }
-    let ff = (f * f) as f64;
-    let residual = (sigma * sigma - (ff - 1.0) / 12.0 - ff / 6.0).max(0.25) / ff;
-    let s2 = residual.sqrt();
-    let k2 = (2.0 * (3.0 * s2).ceil() + 1.0) as usize;
-    // Pad at full resolution (a multiple of f, wider than the kernel) so the borders reflect
-    // exactly as the full-resolution filter does; crop after upsampling.
-    let pad = ((3.0 * sigma).ceil() as usize).div_ceil(f) * f + f;
-    let small = FloatImage::downsample_padded(input, pad, f).convolve(&gaussian_kernel(k2, s2));
-    small.upsample_rows(f, pad, w, h, emit);
-}
-
-/// A Gaussian blur written into `output` (u8, rounded); see [`gaussian_rows`]. Kernels applied
+/// A Gaussian blur written into `output` (u8, rounded); see [`GaussianRows`]. Kernels applied
 /// exactly stream through [`separable_filter_q8`]: OpenCV's own 8-bit fixed point, no full-frame
 /// float copies.
 pub fn gaussian_blur(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, k: usize, sigma: f64) {
@@ -706,16 +769,13 @@ pub fn gaussian_blur(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, k: us
         separable_filter_q8(input, output, &gaussian_kernel(k.max(1) | 1, sigma));
         return;
     }
-    let rows = std::sync::Mutex::new(output.rows_mut());
+    let blurred = GaussianRows::new(input, k, sigma);
     let format = input.format;
-    gaussian_rows(input, k, sigma, |y, row| {
-        let mut tmp = vec![0u8; row.len()];
-        for (d, s) in tmp.iter_mut().zip(row) {
-            *d = (s + 0.5).clamp(0.0, 255.0) as u8;
-        }
-        copy_alpha(format, input.row(y), &mut tmp);
-        let mut guard = rows.lock().expect("rows lock");
-        guard[y].copy_from_slice(&tmp);
+    par_rows(input, output, |y, src, dst| {
+        let mut row = vec![0f32; dst.len()];
+        blurred.row(y, &mut row);
+        round_u8(&row, dst);
+        copy_alpha(format, src, dst);
     });
 }
 
@@ -804,7 +864,13 @@ mod tests {
     fn reduced_resolution_gaussian_is_close_to_the_exact_kernel() {
         let img = crate::synthetic::street_image(320, 200, 3);
         let exact = FloatImage::from_view(&img.view());
-        for (k, sigma) in [(25usize, 4.1f64), (41, 6.5), (113, 17.3)] {
+        for (k, sigma) in [
+            (15usize, 2.6f64),
+            (25, 4.1),
+            (41, 6.5),
+            (59, 9.2),
+            (113, 17.3),
+        ] {
             let want = exact.convolve(&gaussian_kernel(k, sigma));
             let mut got = Image::new(320, 200, PixelFormat::Rgb8);
             gaussian_blur(&img.view(), &mut got.view_mut(), k, sigma);
@@ -815,6 +881,7 @@ mod tests {
                 max = max.max(e);
             }
             let mean = sum / got.data.len() as f64;
+            eprintln!("GAUSS k {k} mean {mean:.3} max {max:.2}");
             assert!(
                 mean < 0.6 && max < 8.0,
                 "k {k}: mean error {mean:.3}, max {max:.2}"

@@ -583,7 +583,8 @@ impl CameraPerturbation for Snowflakes {
             }
             for yy in (yc - ri).max(0)..=(yc + ri).min(hi as i64 - 1) {
                 let drow = (yy - yc + m) as usize * side;
-                let dists = &self.dist[drow + (x0 - xc + m) as usize..=drow + (x1 - xc + m) as usize];
+                let dists =
+                    &self.dist[drow + (x0 - xc + m) as usize..=drow + (x1 - xc + m) as usize];
                 let start = yy as usize * wi;
                 let ts = &mut trans[start + x0 as usize..=start + x1 as usize];
                 for (t, &dd) in ts.iter_mut().zip(dists) {
@@ -831,7 +832,8 @@ impl CameraPerturbation for Lightning {
                         let (cov, is_core) = if d <= core {
                             (1.0, true)
                         } else {
-                            let g = (-(d - core).powi(2) / (2.0 * (glow / 2.5).powi(2))).exp() * 0.12;
+                            let g =
+                                (-(d - core).powi(2) / (2.0 * (glow / 2.5).powi(2))).exp() * 0.12;
                             (g, false)
                         };
                         (cov > 0.01).then_some((dx, cov, is_core))
