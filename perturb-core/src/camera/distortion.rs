@@ -6,27 +6,35 @@ use crate::image::{ImageView, ImageViewMut};
 use crate::rng::Rng;
 use rayon::prelude::*;
 
-/// Bilinear sample of channel-interleaved `input` at (fx, fy) with reflected borders, all
-/// channels into `out`.
-#[inline]
-fn sample_reflect(input: &ImageView<'_>, fx: f32, fy: f32, out: &mut [u8]) {
-    let (w, h, c) = (
-        input.width as usize,
-        input.height as usize,
-        input.format.channels(),
-    );
-    let (x0, y0) = (fx.floor(), fy.floor());
-    let (wx, wy) = (fx - x0, fy - y0);
-    let (x0, y0) = (x0 as i64, y0 as i64);
-    let (xa, xb) = (reflect101(x0, w) * c, reflect101(x0 + 1, w) * c);
-    let (ra, rb) = (
-        input.row(reflect101(y0, h)),
-        input.row(reflect101(y0 + 1, h)),
-    );
-    for ch in 0..c {
-        let top = ra[xa + ch] as f32 * (1.0 - wx) + ra[xb + ch] as f32 * wx;
-        let bot = rb[xa + ch] as f32 * (1.0 - wx) + rb[xb + ch] as f32 * wx;
-        out[ch] = (top * (1.0 - wy) + bot * wy + 0.5) as u8;
+/// One output row of `cv2.remap` with bilinear interpolation in OpenCV's fixed point: each source
+/// coordinate is rounded to 1/32 pixel (`INTER_BITS` = 5) and the four weights are products of
+/// those fractions (exact in 1/1024), rounded once; borders reflect (reflect-101). Pixel `x` of
+/// row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel, all interpolated.
+fn remap_row<const C: usize>(input: &ImageView<'_>, y: usize, dx: &[f32], dy: &[f32], dst: &mut [u8]) {
+    let (w, h) = (input.width as usize, input.height as usize);
+    for (x, ((q, &ox), &oy)) in dst.chunks_exact_mut(C).zip(dx).zip(dy).enumerate() {
+        let fx = ((x as f32 + ox) * 32.0).round_ties_even() as i64;
+        let fy = ((y as f32 + oy) * 32.0).round_ties_even() as i64;
+        let (ax, ay) = ((fx & 31) as u32, (fy & 31) as u32);
+        let (x0, y0) = (fx >> 5, fy >> 5);
+        let (xa, xb) = (reflect101(x0, w) * C, reflect101(x0 + 1, w) * C);
+        let (ra, rb) = (
+            input.row(reflect101(y0, h)),
+            input.row(reflect101(y0 + 1, h)),
+        );
+        let weights = [
+            (32 - ax) * (32 - ay),
+            ax * (32 - ay),
+            (32 - ax) * ay,
+            ax * ay,
+        ];
+        for ch in 0..C {
+            let v = ra[xa + ch] as u32 * weights[0]
+                + ra[xb + ch] as u32 * weights[1]
+                + rb[xa + ch] as u32 * weights[2]
+                + rb[xb + ch] as u32 * weights[3];
+            q[ch] = ((v + 512) >> 10) as u8;
+        }
     }
 }
 
@@ -36,7 +44,8 @@ pub const ELASTIC: [(f32, f64); 5] = [(2.0, 0.4), (3.0, 0.75), (5.0, 0.9), (7.0,
 
 /// C-D1 elastic: each frame draws two fields of U(-1, 1) alpha per pixel, smooths each with a
 /// Gaussian of the severity's sigma (kernel 2 ceil(4 sigma) + 1, as OpenCV picks for float images),
-/// and resamples the image at (x + dx, y + dy) bilinearly with reflected borders (`cv2.remap`). With
+/// and resamples the image at (x + dx, y + dy) bilinearly with reflected borders (`cv2.remap`, in its
+/// fixed point: coordinates in 1/32 pixel). With
 /// the reference's small sigmas this is a fine high-frequency jitter of the pixels (imagecorruptions'
 /// smooth warp uses far larger sigmas; the project follows PerturbationDrive).
 pub struct Elastic {
@@ -60,12 +69,17 @@ impl Elastic {
     /// The smoothed displacement field `salt` of frame `seq` (row-major, w x h).
     fn field(&self, w: usize, h: usize, seq: u64, salt: u64) -> Vec<f32> {
         let r = self.kernel.len() / 2;
-        // Raw uniform field, one random stream per row.
+        // Raw uniform field, one random stream per row, two 24-bit draws per 64-bit output.
         let mut raw = vec![0f32; w * h];
         raw.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
             let mut rng = row_rng(self.seed, seq, salt, y);
-            for v in row.iter_mut() {
-                *v = (rng.f32() * 2.0 - 1.0) * self.alpha;
+            let unit = 1.0 / (1u32 << 24) as f32;
+            for pair in row.chunks_mut(2) {
+                let bits = rng.next_u64();
+                let draws = [(bits >> 40) as f32 * unit, ((bits >> 8) & 0xFF_FFFF) as f32 * unit];
+                for (v, u) in pair.iter_mut().zip(draws) {
+                    *v = (u * 2.0 - 1.0) * self.alpha;
+                }
             }
         });
         // Separable smoothing (reflect-101).
@@ -108,9 +122,11 @@ impl CameraPerturbation for Elastic {
         let dy = self.field(w, h, seq, 0xD2);
         let format = input.format;
         par_rows(input, output, |y, src, dst| {
-            for (x, q) in dst.chunks_exact_mut(c).enumerate() {
-                let k = y * w + x;
-                sample_reflect(input, x as f32 + dx[k], y as f32 + dy[k], q);
+            let (dxr, dyr) = (&dx[y * w..(y + 1) * w], &dy[y * w..(y + 1) * w]);
+            match c {
+                1 => remap_row::<1>(input, y, dxr, dyr, dst),
+                3 => remap_row::<3>(input, y, dxr, dyr, dst),
+                _ => remap_row::<4>(input, y, dxr, dyr, dst),
             }
             copy_alpha(format, src, dst);
         });
