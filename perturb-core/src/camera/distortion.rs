@@ -169,25 +169,31 @@ impl CameraPerturbation for Pixelate {
         // Footprint of small pixel i along an axis of n pixels: source pixels [n i / s, n (i+1) / s).
         let span =
             |i: usize, n: usize, s: usize| (n * i / s, (n * (i + 1) / s).max(n * i / s + 1).min(n));
+        // Rounded division by a footprint size n through 32.32 reciprocals (exact for the sums
+        // of at most a few hundred bytes that occur here).
+        let most = (h.div_ceil(sh) + 1) * (w.div_ceil(sw) + 1);
+        let recip: Vec<u64> = (0..=most as u64)
+            .map(|n| if n == 0 { 0 } else { (1u64 << 32).div_ceil(n) })
+            .collect();
+        let xspans: Vec<(usize, usize)> = (0..sw).map(|i| span(i, w, sw)).collect();
         let mut small = vec![0u8; sw * sh * c];
         small
             .par_chunks_mut(sw * c)
             .enumerate()
             .for_each(|(j, row)| {
                 let (y0, y1) = span(j, h, sh);
-                for i in 0..sw {
-                    let (x0, x1) = span(i, w, sw);
-                    let n = ((y1 - y0) * (x1 - x0)) as u32;
-                    for ch in 0..c {
-                        let mut acc = 0u32;
-                        for y in y0..y1 {
-                            let r = input.row(y);
-                            for x in x0..x1 {
-                                acc += r[x * c + ch] as u32;
-                            }
-                        }
-                        row[i * c + ch] = ((acc + n / 2) / n) as u8;
+                // Column sums over the footprint's rows, then sums over each footprint's columns.
+                let mut cols = vec![0u32; w * c];
+                for y in y0..y1 {
+                    for (a, &v) in cols.iter_mut().zip(input.row(y)) {
+                        *a += v as u32;
                     }
+                }
+                let spans = xspans.iter().copied();
+                match c {
+                    1 => average_row::<1>(&cols, spans, y1 - y0, &recip, row),
+                    3 => average_row::<3>(&cols, spans, y1 - y0, &recip, row),
+                    _ => average_row::<4>(&cols, spans, y1 - y0, &recip, row),
                 }
             });
         let xmap: Vec<usize> = (0..w).map(|x| (x * sw / w).min(sw - 1)).collect();
@@ -195,12 +201,44 @@ impl CameraPerturbation for Pixelate {
         par_rows(input, output, |y, src, dst| {
             let j = (y * sh / h).min(sh - 1);
             let srow = &small[j * sw * c..(j + 1) * sw * c];
-            for (x, q) in dst.chunks_exact_mut(c).enumerate() {
-                let i = xmap[x];
-                q.copy_from_slice(&srow[i * c..i * c + c]);
+            match c {
+                1 => nearest_row::<1>(srow, &xmap, dst),
+                3 => nearest_row::<3>(srow, &xmap, dst),
+                _ => nearest_row::<4>(srow, &xmap, dst),
             }
             copy_alpha(format, src, dst);
         });
+    }
+}
+
+/// One row of area averages: small pixel i averages the column sums `cols` (over `rows` rows)
+/// of its span `[x0, x1)`, rounded, with `recip[n]` the 32.32 reciprocal of n.
+fn average_row<const C: usize>(
+    cols: &[u32],
+    spans: impl Iterator<Item = (usize, usize)>,
+    rows: usize,
+    recip: &[u64],
+    out: &mut [u8],
+) {
+    for (q, (x0, x1)) in out.chunks_exact_mut(C).zip(spans) {
+        let n = rows * (x1 - x0);
+        let mut acc = [0u32; C];
+        for px in cols[x0 * C..x1 * C].chunks_exact(C) {
+            for ch in 0..C {
+                acc[ch] += px[ch];
+            }
+        }
+        for ch in 0..C {
+            q[ch] = (((acc[ch] + n as u32 / 2) as u64 * recip[n]) >> 32) as u8;
+        }
+    }
+}
+
+/// Nearest-neighbour row: pixel x of `dst` is pixel `xmap[x]` of `src` (`C` bytes per pixel).
+fn nearest_row<const C: usize>(src: &[u8], xmap: &[usize], dst: &mut [u8]) {
+    for (q, &i) in dst.chunks_exact_mut(C).zip(xmap) {
+        let p: [u8; C] = src[i * C..i * C + C].try_into().expect("C bytes");
+        q.copy_from_slice(&p);
     }
 }
 
