@@ -10,7 +10,13 @@ use rayon::prelude::*;
 /// coordinate is rounded to 1/32 pixel (`INTER_BITS` = 5) and the four weights are products of
 /// those fractions (exact in 1/1024), rounded once; borders reflect (reflect-101). Pixel `x` of
 /// row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel, all interpolated.
-fn remap_row<const C: usize>(input: &ImageView<'_>, y: usize, dx: &[f32], dy: &[f32], dst: &mut [u8]) {
+fn remap_row<const C: usize>(
+    input: &ImageView<'_>,
+    y: usize,
+    dx: &[f32],
+    dy: &[f32],
+    dst: &mut [u8],
+) {
     let (w, h) = (input.width as usize, input.height as usize);
     for (x, ((q, &ox), &oy)) in dst.chunks_exact_mut(C).zip(dx).zip(dy).enumerate() {
         let fx = ((x as f32 + ox) * 32.0).round_ties_even() as i64;
@@ -76,7 +82,10 @@ impl Elastic {
             let unit = 1.0 / (1u32 << 24) as f32;
             for pair in row.chunks_mut(2) {
                 let bits = rng.next_u64();
-                let draws = [(bits >> 40) as f32 * unit, ((bits >> 8) & 0xFF_FFFF) as f32 * unit];
+                let draws = [
+                    (bits >> 40) as f32 * unit,
+                    ((bits >> 8) & 0xFF_FFFF) as f32 * unit,
+                ];
                 for (v, u) in pair.iter_mut().zip(draws) {
                     *v = (u * 2.0 - 1.0) * self.alpha;
                 }
@@ -292,22 +301,52 @@ impl CameraPerturbation for SamplePairing {
                 (a * c, b * c, wx)
             })
             .collect();
+        // The columns the crop reads.
+        let lo = cols.iter().map(|t| t.0.min(t.1)).min().unwrap_or(0);
+        let hi = cols.iter().map(|t| t.0.max(t.1) + c).max().unwrap_or(0);
+        let cols: Vec<(usize, usize, f32)> = cols
+            .into_iter()
+            .map(|(xa, xb, wx)| (xa - lo, xb - lo, wx))
+            .collect();
         par_rows(input, output, |y, src, dst| {
             let (ya, yb, wy) = tap(
                 oy + ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (ch - 1) as f32),
                 h,
             );
-            let (ra, rb) = (input.row(ya), input.row(yb));
-            for ((x, q), &(xa, xb, wx)) in dst.chunks_exact_mut(c).enumerate().zip(&cols) {
-                for k in 0..c {
-                    let top = ra[xa + k] as f32 * (1.0 - wx) + ra[xb + k] as f32 * wx;
-                    let bot = rb[xa + k] as f32 * (1.0 - wx) + rb[xb + k] as f32 * wx;
-                    let p = (top * (1.0 - wy) + bot * wy + 0.5) as u8;
-                    q[k] = (a * src[x * c + k] as f32 + (1.0 - a) * p as f32 + 0.5) as u8;
-                }
+            // Bilinear interpolation is separable: the vertical blend of the two crop rows once
+            // per column, then one horizontal blend per output sample.
+            let (ra, rb) = (&input.row(ya)[lo..hi], &input.row(yb)[lo..hi]);
+            let vrow: Vec<f32> = ra
+                .iter()
+                .zip(rb)
+                .map(|(&p, &q)| p as f32 * (1.0 - wy) + q as f32 * wy)
+                .collect();
+            match c {
+                1 => pair_row::<1>(&vrow, &cols, a, src, dst),
+                3 => pair_row::<3>(&vrow, &cols, a, src, dst),
+                _ => pair_row::<4>(&vrow, &cols, a, src, dst),
             }
             copy_alpha(format, src, dst);
         });
+    }
+}
+
+/// One row of [`SamplePairing`]: the crop sample `p` at each output pixel is the horizontal blend
+/// of the vertically blended crop row `vrow` at `cols[x]`, rounded; `out = a I + (1 - a) p`.
+fn pair_row<const C: usize>(
+    vrow: &[f32],
+    cols: &[(usize, usize, f32)],
+    a: f32,
+    src: &[u8],
+    dst: &mut [u8],
+) {
+    for ((q, s), &(xa, xb, wx)) in dst.chunks_exact_mut(C).zip(src.chunks_exact(C)).zip(cols) {
+        let va: [f32; C] = vrow[xa..xa + C].try_into().expect("C samples");
+        let vb: [f32; C] = vrow[xb..xb + C].try_into().expect("C samples");
+        for k in 0..C {
+            let p = (va[k] * (1.0 - wx) + vb[k] * wx + 0.5) as u8;
+            q[k] = (a * s[k] as f32 + (1.0 - a) * p as f32 + 0.5) as u8;
+        }
     }
 }
 

@@ -736,6 +736,9 @@ impl CameraPerturbation for Raindrops {
     }
 }
 
+/// One row of the lightning stamp: the row offset and the (dx, coverage, is-core) of its pixels.
+type StampRow = (i64, Vec<(i64, f32, bool)>);
+
 /// C-C9 lightning: a bolt from the sky with branches, glow, flicker and flashes, procedural and
 /// animated, blended with the overlay weight i = .15 .25 .40 .60 .85. A new strike (new bolt shape
 /// from fractal midpoint displacement, new position) every 12 frames; within a strike the bolt
@@ -824,7 +827,7 @@ impl CameraPerturbation for Lightning {
         // The stamp drawn along the paths: per row offset, the (dx, coverage, is-core) of the
         // pixels it covers by more than 1%.
         let rr = glow.ceil() as i64;
-        let stamp: Vec<(i64, Vec<(i64, f32, bool)>)> = (-rr..=rr)
+        let stamp: Vec<StampRow> = (-rr..=rr)
             .map(|dy| {
                 let row = (-rr..=rr)
                     .filter_map(|dx| {
