@@ -67,9 +67,11 @@ impl CameraPerturbation for DefocusBlur {
         );
         let r = self.half_widths.len() / 2;
         let pad = r;
-        // Prefix sums of every row padded by reflection: prefix[x] = sum of padded[0..x].
+        // Prefix sums of every row padded by reflection, modulo 2^16: prefix[x] = sum of
+        // padded[0..x]. A segment's sum (at most (2r + 1) 255 < 2^16) is the wrapping difference
+        // of two of them, exactly.
         let pw = w + 2 * pad;
-        let mut prefix = vec![0u32; h * (pw + 1) * c];
+        let mut prefix = vec![0u16; h * (pw + 1) * c];
         prefix
             .par_chunks_mut((pw + 1) * c)
             .enumerate()
@@ -78,21 +80,35 @@ impl CameraPerturbation for DefocusBlur {
                 for px in 0..pw {
                     let sx = reflect101(px as i64 - pad as i64, w);
                     for ch in 0..c {
-                        pre[(px + 1) * c + ch] = pre[px * c + ch] + src[sx * c + ch] as u32;
+                        pre[(px + 1) * c + ch] =
+                            pre[px * c + ch].wrapping_add(src[sx * c + ch] as u16);
                     }
                 }
             });
+        // Disk rows summed in u16 before widening: as many as fit 2^16 at the widest segment.
+        let per_group = (u16::MAX as usize / ((2 * r + 1) * 255)).max(1);
         let format = input.format;
         par_rows(input, output, |y, src, dst| {
             let mut acc = vec![0u32; w * c];
-            for (k, &hw) in self.half_widths.iter().enumerate() {
-                let sy = reflect101(y as i64 + k as i64 - r as i64, h);
-                let pre = &prefix[sy * (pw + 1) * c..(sy + 1) * (pw + 1) * c];
-                // Segment [x - hw, x + hw] of the unpadded row = padded [x + pad - hw, x + pad + hw].
-                let lo = (pad - hw) * c;
-                let hi = (pad + hw + 1) * c;
-                for (i, a) in acc.iter_mut().enumerate() {
-                    *a += pre[hi + i] - pre[lo + i];
+            let mut part = vec![0u16; w * c];
+            let rows: Vec<(usize, usize)> = self
+                .half_widths
+                .iter()
+                .enumerate()
+                .map(|(k, &hw)| (reflect101(y as i64 + k as i64 - r as i64, h), hw))
+                .collect();
+            for group in rows.chunks(per_group) {
+                part.fill(0);
+                for &(sy, hw) in group {
+                    let pre = &prefix[sy * (pw + 1) * c..(sy + 1) * (pw + 1) * c];
+                    // Segment [x - hw, x + hw] of the unpadded row = padded [x + pad - hw, x + pad + hw].
+                    let (lo, hi) = (&pre[(pad - hw) * c..], &pre[(pad + hw + 1) * c..]);
+                    for ((p, a), b) in part.iter_mut().zip(&hi[..w * c]).zip(&lo[..w * c]) {
+                        *p = p.wrapping_add(a.wrapping_sub(*b));
+                    }
+                }
+                for (a, p) in acc.iter_mut().zip(&part) {
+                    *a += *p as u32;
                 }
             }
             for (d, a) in dst.iter_mut().zip(&acc) {

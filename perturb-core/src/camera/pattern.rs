@@ -5,11 +5,12 @@
 //! dotted lines, zigzag, cutout) are redrawn every frame from (seed, sequence number), as the
 //! references redraw them on every call.
 
-use super::ops::par_rows;
+use super::ops::{copy_alpha, par_rows};
 use super::texture::{fill_disc, fill_rect, size_scale};
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut};
 use crate::rng::Rng;
+use rayon::prelude::*;
 
 fn copy(input: &ImageView<'_>, output: &mut ImageViewMut<'_>) {
     par_rows(input, output, |_, s, d| d.copy_from_slice(s));
@@ -186,61 +187,76 @@ pub const CANNY: [(i32, i32); 5] = [(51, 151), (60, 160), (75, 175), (90, 190), 
 /// direction quantised to 0, 45, 90, 135 degrees, hysteresis: pixels above `high` start edges that
 /// grow through 8-connected pixels above `low`. No smoothing first (OpenCV's Canny has none).
 pub fn canny(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> Vec<bool> {
-    let at = |x: i64, y: i64| {
-        gray[(y.clamp(0, h as i64 - 1) as usize) * w + x.clamp(0, w as i64 - 1) as usize] as i32
-    };
-    let mut gx = vec![0i32; w * h];
-    let mut gy = vec![0i32; w * h];
-    let mut mag = vec![0i32; w * h];
-    for y in 0..h as i64 {
-        for x in 0..w as i64 {
-            let dx = (at(x + 1, y - 1) + 2 * at(x + 1, y) + at(x + 1, y + 1))
-                - (at(x - 1, y - 1) + 2 * at(x - 1, y) + at(x - 1, y + 1));
-            let dy = (at(x - 1, y + 1) + 2 * at(x, y + 1) + at(x + 1, y + 1))
-                - (at(x - 1, y - 1) + 2 * at(x, y - 1) + at(x + 1, y - 1));
-            let k = y as usize * w + x as usize;
-            gx[k] = dx;
-            gy[k] = dy;
-            mag[k] = dx.abs() + dy.abs();
-        }
+    if w == 0 || h == 0 {
+        return Vec::new();
     }
-    let m = |x: i64, y: i64| {
-        if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-            0
-        } else {
-            mag[y as usize * w + x as usize]
+    // Sobel, row by row: with S = up + 2 mid + down and D = down - up per column (rows clamped),
+    // gx = S[x + 1] - S[x - 1] and gy = D[x - 1] + 2 D[x] + D[x + 1] (columns clamped).
+    let mut grad = vec![(0i16, 0i16, 0i16); w * h];
+    grad.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let row = |y: usize| &gray[y * w..(y + 1) * w];
+        let (up, mid, down) = (row(y.saturating_sub(1)), row(y), row((y + 1).min(h - 1)));
+        let mut s = vec![0i16; w + 2];
+        let mut d = vec![0i16; w + 2];
+        for (x, ((&u, &m), &n)) in up.iter().zip(mid).zip(down).enumerate() {
+            s[x + 1] = u as i16 + 2 * m as i16 + n as i16;
+            d[x + 1] = n as i16 - u as i16;
         }
-    };
-    // 0: not an edge, 1: weak candidate, 2: strong.
+        (s[0], s[w + 1], d[0], d[w + 1]) = (s[1], s[w], d[1], d[w]);
+        for (x, g) in out.iter_mut().enumerate() {
+            let gx = s[x + 2] - s[x];
+            let gy = d[x] + 2 * d[x + 1] + d[x + 2];
+            *g = (gx, gy, gx.abs() + gy.abs());
+        }
+    });
+    // Non-maximum suppression, row by row: 0 not an edge, 1 weak candidate, 2 strong. Outside
+    // the image the magnitude is 0.
     let mut state = vec![0u8; w * h];
     let (tg22, tg67) = (0.414_213_56f64, 2.414_213_56f64);
-    let mut stack = Vec::new();
-    for y in 0..h as i64 {
-        for x in 0..w as i64 {
-            let k = y as usize * w + x as usize;
-            let v = mag[k];
-            if v <= low {
-                continue;
-            }
-            let (dx, dy) = (gx[k] as f64, gy[k] as f64);
-            let (ax, ay) = (dx.abs(), dy.abs());
-            let is_max = if ay <= ax * tg22 {
-                v > m(x - 1, y) && v >= m(x + 1, y)
-            } else if ay >= ax * tg67 {
-                v > m(x, y - 1) && v >= m(x, y + 1)
-            } else if (dx > 0.0) == (dy > 0.0) {
-                v > m(x - 1, y - 1) && v >= m(x + 1, y + 1)
-            } else {
-                v > m(x + 1, y - 1) && v >= m(x - 1, y + 1)
+    let seeds: Vec<Vec<usize>> = state
+        .par_chunks_mut(w)
+        .enumerate()
+        .map(|(y, out)| {
+            let mut strong = Vec::new();
+            let m = |x: i64, dy: i64| {
+                let yy = y as i64 + dy;
+                if x < 0 || yy < 0 || x >= w as i64 || yy >= h as i64 {
+                    0
+                } else {
+                    grad[yy as usize * w + x as usize].2 as i32
+                }
             };
-            if is_max {
-                state[k] = if v > high { 2 } else { 1 };
-                if v > high {
-                    stack.push(k);
+            for (x, o) in out.iter_mut().enumerate() {
+                let (gx, gy, v) = grad[y * w + x];
+                let v = v as i32;
+                if v <= low {
+                    continue;
+                }
+                let x = x as i64;
+                let (dx, dy) = (gx as f64, gy as f64);
+                let (ax, ay) = (dx.abs(), dy.abs());
+                let is_max = if ay <= ax * tg22 {
+                    v > m(x - 1, 0) && v >= m(x + 1, 0)
+                } else if ay >= ax * tg67 {
+                    v > m(x, -1) && v >= m(x, 1)
+                } else if (dx > 0.0) == (dy > 0.0) {
+                    v > m(x - 1, -1) && v >= m(x + 1, 1)
+                } else {
+                    v > m(x + 1, -1) && v >= m(x - 1, 1)
+                };
+                if is_max {
+                    *o = if v > high { 2 } else { 1 };
+                    if v > high {
+                        strong.push(y * w + x as usize);
+                    }
                 }
             }
-        }
-    }
+            strong
+        })
+        .collect();
+    // Hysteresis: the weak candidates 8-connected to a strong pixel (the closure does not depend
+    // on the order the seeds are taken in).
+    let mut stack: Vec<usize> = seeds.concat();
     let mut edge = vec![false; w * h];
     while let Some(k) = stack.pop() {
         if edge[k] {
@@ -284,14 +300,14 @@ impl CameraPerturbation for CannyEdges {
         let f = input.format;
         let c = f.channels();
         let [ri, gi, bi] = f.rgb_offsets();
-        let gray: Vec<u8> = (0..h)
-            .flat_map(|y| {
-                input
-                    .row(y)
-                    .chunks_exact(c)
-                    .map(move |p| crate::image::luma(p[ri], p[gi], p[bi]))
-            })
-            .collect();
+        let mut gray = vec![0u8; w * h];
+        gray.par_chunks_mut(w.max(1))
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (g, p) in row.iter_mut().zip(input.row(y).chunks_exact(c)) {
+                    *g = crate::image::luma(p[ri], p[gi], p[bi]);
+                }
+            });
         let edges = canny(&gray, w, h, self.low, self.high);
         let dim: [u8; 256] = std::array::from_fn(|v| (0.7 * v as f64).round_ties_even() as u8);
         let red: [u8; 256] = std::array::from_fn(|v| {
@@ -300,28 +316,22 @@ impl CameraPerturbation for CannyEdges {
         // On mono8 the red edge colour is its luma, 76.
         let red_grey: [u8; 256] =
             std::array::from_fn(|v| (0.7 * v as f64 + 0.3 * 76.0).round_ties_even() as u8);
+        // Every channel dimmed; on edge pixels the red channel (the single channel of mono8)
+        // gets the edge colour instead; alpha is copied.
+        let (edge_lut, edge_ch) = if f.is_mono() {
+            (&red_grey, 0)
+        } else {
+            (&red, ri)
+        };
         par_rows(input, output, |y, src, dst| {
-            for (x, (p, q)) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)).enumerate() {
-                if f.is_mono() {
-                    q[0] = if edges[y * w + x] {
-                        red_grey[p[0] as usize]
-                    } else {
-                        dim[p[0] as usize]
-                    };
-                    continue;
-                }
-                let e = edges[y * w + x];
-                q[ri] = if e {
-                    red[p[ri] as usize]
-                } else {
-                    dim[p[ri] as usize]
-                };
-                q[gi] = dim[p[gi] as usize];
-                q[bi] = dim[p[bi] as usize];
-                if let Some(a) = f.alpha_offset() {
-                    q[a] = p[a];
-                }
+            for (q, p) in dst.iter_mut().zip(src) {
+                *q = dim[*p as usize];
             }
+            let row_edges = &edges[y * w..(y + 1) * w];
+            for (x, _) in row_edges.iter().enumerate().filter(|(_, e)| **e) {
+                dst[x * c + edge_ch] = edge_lut[src[x * c + edge_ch] as usize];
+            }
+            copy_alpha(f, src, dst);
         });
     }
 }
