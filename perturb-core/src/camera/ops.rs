@@ -208,22 +208,37 @@ pub fn separable_filter_q8(input: &ImageView<'_>, output: &mut ImageViewMut<'_>,
             }
         }
     };
+    // Bands of rows; within a band the horizontal pass of each source row is kept in a ring of
+    // 2r + 1 rows (small enough to stay in cache), so each is computed once per band.
+    let k = 2 * r + 1;
     let rows = output.rows_mut();
     rows.into_par_iter()
         .enumerate()
-        .chunks(32)
+        .chunks(128)
         .for_each(|chunk| {
             let y0 = chunk[0].0;
             let lo = y0 as i64 - r as i64;
-            let n = chunk.len() + 2 * r;
             let mut padded = vec![0u16; (w + 2 * r) * c];
-            let mut hrows = vec![0u16; n * row_len];
-            for (k, dst) in hrows.chunks_exact_mut(row_len).enumerate() {
-                hpass(reflect101(lo + k as i64, h), &mut padded, dst);
+            let mut ring = vec![0u16; k * row_len];
+            // Source row lo + i lives in slot i % k.
+            let slot = |i: usize| (i % k) * row_len..(i % k + 1) * row_len;
+            for i in 0..k - 1 {
+                hpass(
+                    reflect101(lo + i as i64, h),
+                    &mut padded,
+                    &mut ring[slot(i)],
+                );
             }
             let mut acc = vec![0u32; row_len];
             for (y, out) in chunk {
-                let row = |t: usize| &hrows[(y - y0 + t) * row_len..(y - y0 + t + 1) * row_len];
+                let i0 = y - y0;
+                let last = i0 + k - 1;
+                hpass(
+                    reflect101(lo + last as i64, h),
+                    &mut padded,
+                    &mut ring[slot(last)],
+                );
+                let row = |t: usize| &ring[slot(i0 + t)];
                 let kc = q[r] as u32;
                 for (a, s) in acc.iter_mut().zip(row(r)) {
                     *a = (1 << 15) + kc * *s as u32;
