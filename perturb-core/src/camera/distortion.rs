@@ -9,36 +9,57 @@ use rayon::prelude::*;
 /// One output row of `cv2.remap` with bilinear interpolation in OpenCV's fixed point: each source
 /// coordinate is rounded to 1/32 pixel (`INTER_BITS` = 5) and the four weights are products of
 /// those fractions (exact in 1/1024), rounded once; borders reflect (reflect-101). Pixel `x` of
-/// row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel, all interpolated.
+/// row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel, all interpolated. `columns`
+/// holds x as f32 for each x; `reach` bounds |dy| (the source rows within it are looked up once
+/// per row).
 fn remap_row<const C: usize>(
     input: &ImageView<'_>,
     y: usize,
-    dx: &[f32],
-    dy: &[f32],
+    (columns, dx, dy, reach): (&[f32], &[f32], &[f32], f32),
     dst: &mut [u8],
 ) {
     let (w, h) = (input.width as usize, input.height as usize);
-    for (x, ((q, &ox), &oy)) in dst.chunks_exact_mut(C).zip(dx).zip(dy).enumerate() {
-        let fx = ((x as f32 + ox) * 32.0).round_ties_even() as i64;
-        let fy = ((y as f32 + oy) * 32.0).round_ties_even() as i64;
+    let span = reach.ceil() as i64 + 2;
+    let top = y as i64 - span;
+    let rows: Vec<&[u8]> = (top..=y as i64 + span + 1)
+        .map(|sy| input.row(reflect101(sy, h)))
+        .collect();
+    let row_at = |sy: i64| match rows.get((sy - top) as usize) {
+        Some(r) if sy >= top => *r,
+        _ => input.row(reflect101(sy, h)),
+    };
+    // Source coordinates in 1/32 pixel, rounded half to even, in two vectorisable passes: adding
+    // 1.5 2^23 leaves the rounded integer in the low mantissa bits (exact for |v| < 2^22).
+    let round = |v: f32| ((v + 12_582_912.0).to_bits() as i32).wrapping_sub(0x4B40_0000);
+    let fxs: Vec<i32> = dx
+        .iter()
+        .zip(columns)
+        .map(|(&ox, &x)| round((x + ox) * 32.0))
+        .collect();
+    let fys: Vec<i32> = dy.iter().map(|&oy| round((y as f32 + oy) * 32.0)).collect();
+    for ((q, &fx), &fy) in dst.chunks_exact_mut(C).zip(&fxs).zip(&fys) {
+        let (fx, fy) = (fx as i64, fy as i64);
         let (ax, ay) = ((fx & 31) as u32, (fy & 31) as u32);
         let (x0, y0) = (fx >> 5, fy >> 5);
-        let (xa, xb) = (reflect101(x0, w) * C, reflect101(x0 + 1, w) * C);
-        let (ra, rb) = (
-            input.row(reflect101(y0, h)),
-            input.row(reflect101(y0 + 1, h)),
-        );
+        let (ra, rb) = (row_at(y0), row_at(y0 + 1));
         let weights = [
             (32 - ax) * (32 - ay),
             ax * (32 - ay),
             (32 - ax) * ay,
             ax * ay,
         ];
+        let (xa, xb) = if x0 >= 0 && x0 + 1 < w as i64 {
+            (x0 as usize * C, x0 as usize * C + C)
+        } else {
+            (reflect101(x0, w) * C, reflect101(x0 + 1, w) * C)
+        };
+        let (pa, pb) = (&ra[xa..xa + C], &ra[xb..xb + C]);
+        let (pc, pd) = (&rb[xa..xa + C], &rb[xb..xb + C]);
         for ch in 0..C {
-            let v = ra[xa + ch] as u32 * weights[0]
-                + ra[xb + ch] as u32 * weights[1]
-                + rb[xa + ch] as u32 * weights[2]
-                + rb[xb + ch] as u32 * weights[3];
+            let v = pa[ch] as u32 * weights[0]
+                + pb[ch] as u32 * weights[1]
+                + pc[ch] as u32 * weights[2]
+                + pd[ch] as u32 * weights[3];
             q[ch] = ((v + 512) >> 10) as u8;
         }
     }
@@ -72,51 +93,38 @@ pub const ELASTIC_BUILDER: CameraBuilder = |s| {
 };
 
 impl Elastic {
-    /// The smoothed displacement field `salt` of frame `seq` (row-major, w x h).
-    fn field(&self, w: usize, h: usize, seq: u64, salt: u64) -> Vec<f32> {
-        let r = self.kernel.len() / 2;
-        // Raw uniform field, one random stream per row, two 24-bit draws per 64-bit output.
-        let mut raw = vec![0f32; w * h];
-        raw.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let mut rng = row_rng(self.seed, seq, salt, y);
-            let unit = 1.0 / (1u32 << 24) as f32;
-            for pair in row.chunks_mut(2) {
-                let bits = rng.next_u64();
-                let draws = [
-                    (bits >> 40) as f32 * unit,
-                    ((bits >> 8) & 0xFF_FFFF) as f32 * unit,
-                ];
-                for (v, u) in pair.iter_mut().zip(draws) {
-                    *v = (u * 2.0 - 1.0) * self.alpha;
-                }
+    /// Row `y` of displacement field `salt` of frame `seq` before smoothing: U(-1, 1) alpha per
+    /// pixel, one random stream per row, four 16-bit draws per 64-bit output.
+    fn raw_row(&self, seq: u64, salt: u64, y: usize, row: &mut [f32]) {
+        let mut rng = row_rng(self.seed, seq, salt, y);
+        // (u + 1/2) / 2^15 - 1 for a 16-bit u: centred, steps of 2^-15 alpha (the remap rounds
+        // to 1/32 pixel).
+        let (unit, offset) = (self.alpha / 32768.0, self.alpha * (0.5 / 32768.0 - 1.0));
+        for quad in row.chunks_mut(4) {
+            let bits = rng.next_u64();
+            for (i, v) in quad.iter_mut().enumerate() {
+                *v = ((bits >> (16 * i)) & 0xFFFF) as f32 * unit + offset;
             }
-        });
-        // Separable smoothing (reflect-101).
-        let mut tmp = vec![0f32; w * h];
-        tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-            let src = &raw[y * w..(y + 1) * w];
-            // The row padded once (reflect-101), then one shifted multiply-add per tap, in tap
-            // order (the same sums as tap-by-tap per pixel).
-            let padded: Vec<f32> = (0..w + 2 * r)
-                .map(|p| src[reflect101(p as i64 - r as i64, w)])
-                .collect();
-            out.fill(0.0);
-            for (t, k) in self.kernel.iter().enumerate() {
-                for (o, s) in out.iter_mut().zip(&padded[t..t + w]) {
-                    *o += k * s;
-                }
+        }
+    }
+
+    /// Horizontal smoothing of a raw row (reflect-101): the row padded once, then one shifted
+    /// multiply-add per pair of symmetric taps.
+    fn smooth_row(&self, raw: &[f32], padded: &mut Vec<f32>, out: &mut [f32]) {
+        let (w, r) = (raw.len(), self.kernel.len() / 2);
+        padded.clear();
+        padded.extend((0..w + 2 * r).map(|p| raw[reflect101(p as i64 - r as i64, w)]));
+        // The kernel is symmetric: taps t and 2r - t share one multiply.
+        let kc = self.kernel[r];
+        for (o, s) in out.iter_mut().zip(&padded[r..r + w]) {
+            *o = kc * s;
+        }
+        for (t, k) in self.kernel[..r].iter().enumerate() {
+            let (a, b) = (&padded[t..t + w], &padded[2 * r - t..2 * r - t + w]);
+            for ((o, s), u) in out.iter_mut().zip(a).zip(b) {
+                *o += k * (s + u);
             }
-        });
-        raw.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-            out.fill(0.0);
-            for (t, k) in self.kernel.iter().enumerate() {
-                let sy = reflect101(y as i64 + t as i64 - r as i64, h);
-                for (o, s) in out.iter_mut().zip(&tmp[sy * w..(sy + 1) * w]) {
-                    *o += k * s;
-                }
-            }
-        });
-        raw
+        }
     }
 }
 
@@ -127,18 +135,58 @@ impl CameraPerturbation for Elastic {
             input.height as usize,
             input.format.channels(),
         );
-        let dx = self.field(w, h, seq, 0xD1);
-        let dy = self.field(w, h, seq, 0xD2);
         let format = input.format;
-        par_rows(input, output, |y, src, dst| {
-            let (dxr, dyr) = (&dx[y * w..(y + 1) * w], &dy[y * w..(y + 1) * w]);
-            match c {
-                1 => remap_row::<1>(input, y, dxr, dyr, dst),
-                3 => remap_row::<3>(input, y, dxr, dyr, dst),
-                _ => remap_row::<4>(input, y, dxr, dyr, dst),
-            }
-            copy_alpha(format, src, dst);
-        });
+        let k = self.kernel.len();
+        let r = k / 2;
+        // Bands of rows; within a band the horizontally smoothed rows of both fields live in a
+        // ring of k rows, so the fields are never held whole. Each source row's draws depend
+        // only on (seed, seq, field, row), so rows shared by two bands are drawn identically.
+        let columns: Vec<f32> = (0..w).map(|x| x as f32).collect();
+        let rows = output.rows_mut();
+        rows.into_par_iter()
+            .enumerate()
+            .chunks(128)
+            .for_each(|chunk| {
+                let y0 = chunk[0].0;
+                let lo = y0 as i64 - r as i64;
+                let mut ring = [vec![0f32; k * w], vec![0f32; k * w]];
+                let (mut raw, mut padded) = (vec![0f32; w], Vec::new());
+                let slot = |i: usize| (i % k) * w..(i % k + 1) * w;
+                let mut fill = |i: usize, ring: &mut [Vec<f32>; 2]| {
+                    let sy = reflect101(lo + i as i64, h);
+                    for (field, salt) in ring.iter_mut().zip([0xD1, 0xD2]) {
+                        self.raw_row(seq, salt, sy, &mut raw);
+                        self.smooth_row(&raw, &mut padded, &mut field[slot(i)]);
+                    }
+                };
+                for i in 0..k - 1 {
+                    fill(i, &mut ring);
+                }
+                let mut d = [vec![0f32; w], vec![0f32; w]];
+                for (y, dst) in chunk {
+                    let i0 = y - y0;
+                    fill(i0 + k - 1, &mut ring);
+                    // Vertical smoothing, symmetric taps paired.
+                    for (out, field) in d.iter_mut().zip(&ring) {
+                        let kc = self.kernel[r];
+                        for (o, s) in out.iter_mut().zip(&field[slot(i0 + r)]) {
+                            *o = kc * s;
+                        }
+                        for (t, kw) in self.kernel[..r].iter().enumerate() {
+                            let (a, b) = (&field[slot(i0 + t)], &field[slot(i0 + 2 * r - t)]);
+                            for ((o, s), u) in out.iter_mut().zip(a).zip(b) {
+                                *o += kw * (s + u);
+                            }
+                        }
+                    }
+                    match c {
+                        1 => remap_row::<1>(input, y, (&columns, &d[0], &d[1], self.alpha), dst),
+                        3 => remap_row::<3>(input, y, (&columns, &d[0], &d[1], self.alpha), dst),
+                        _ => remap_row::<4>(input, y, (&columns, &d[0], &d[1], self.alpha), dst),
+                    }
+                    copy_alpha(format, input.row(y), dst);
+                }
+            });
     }
 }
 
