@@ -280,33 +280,38 @@ pub const ZOOM_BLUR: CameraBuilder = |s| {
     }))
 };
 
-/// One bilinear tap along an axis: (first index, second index, weight of the second in 1/256).
-type AxisTap = (u32, u32, u16);
+/// One bilinear tap along an axis: (first index, weight of the next index in 1/256). At the last
+/// index the weight is 0.
+type AxisTap = (u32, u16);
 
 /// Bilinear source coordinates of a zoom by `z` about the centre along an axis of `n` pixels:
-/// (first index, second index, weight of the second, in 1/256).
+/// (first index, weight of the next, in 1/256).
 fn zoom_axis(n: usize, z: f64) -> Vec<AxisTap> {
     let centre = (n as f64 - 1.0) / 2.0;
     (0..n)
         .map(|i| {
             let p = (centre + (i as f64 - centre) / z).clamp(0.0, (n - 1) as f64);
             let i0 = p.floor() as usize;
-            let i1 = (i0 + 1).min(n - 1);
-            (
-                i0 as u32,
-                i1 as u32,
-                ((p - i0 as f64) * 256.0).round() as u16,
-            )
+            (i0 as u32, ((p - i0 as f64) * 256.0).round() as u16)
         })
         .collect()
 }
 
-/// Adds one horizontally blended sample per output pixel of `vrow` (vertically blended, 8.8).
-fn zoom_row<const C: usize>(vrow: &[u16], xm: &[AxisTap], acc: &mut [u32]) {
-    for (out, &(x0, x1, wx)) in acc.chunks_exact_mut(C).zip(xm) {
-        let (x0, x1, wx) = (x0 as usize * C, x1 as usize * C, wx as u32);
+/// Adds one horizontally blended sample per output pixel of `vrow` (vertically blended, 8.8,
+/// with one spare pixel at the end so that the next column always exists; `xm` holds the offset of
+/// each output pixel's first sample and the weight of the second): `a + (b - a) wx` with `a`
+/// scaled by 256, in wrapping 32-bit arithmetic (the total is positive and below 2^32, so it
+/// comes out exact).
+fn zoom_row<const C: usize>(vrow: &[u16], xm: &[(u32, i32)], acc: &mut [u32]) {
+    for (out, &(i, wx)) in acc.chunks_exact_mut(C).zip(xm) {
+        let two = &vrow[i as usize..i as usize + 2 * C];
+        let (p, q): (&[u16; C], &[u16; C]) = (
+            two[..C].try_into().expect("C"),
+            two[C..].try_into().expect("C"),
+        );
         for (ch, o) in out.iter_mut().enumerate() {
-            *o += vrow[x0 + ch] as u32 * (256 - wx) + vrow[x1 + ch] as u32 * wx;
+            let (a, b) = (p[ch] as i32, q[ch] as i32);
+            *o = o.wrapping_add(((a << 8) + (b - a) * wx) as u32);
         }
     }
 }
@@ -318,24 +323,51 @@ impl CameraPerturbation for ZoomBlur {
             input.height as usize,
             input.format.channels(),
         );
-        let maps: Vec<(Vec<AxisTap>, Vec<AxisTap>)> = self
+        // Per factor: column taps, the columns they read (lo..hi), row taps. z = 1 is the
+        // identity and is added as such.
+        let identities = self.factors.iter().filter(|&&z| z == 1.0).count() as u32 + 1;
+        type Taps = Vec<(u32, i32)>;
+        let maps: Vec<(Taps, usize, usize, Vec<AxisTap>)> = self
             .factors
             .iter()
-            .map(|&z| (zoom_axis(w, z), zoom_axis(h, z)))
+            .filter(|&&z| z != 1.0)
+            .map(|&z| {
+                let xm = zoom_axis(w, z);
+                let lo = xm.first().map_or(0, |t| t.0 as usize);
+                let hi = xm.last().map_or(0, |t| t.0 as usize + 2).min(w);
+                // Offsets into the blended crop row.
+                let taps = xm
+                    .iter()
+                    .map(|&(x0, wx)| (((x0 as usize - lo) * c) as u32, wx as i32))
+                    .collect();
+                (taps, lo, hi, zoom_axis(h, z))
+            })
             .collect();
         let n = (self.factors.len() + 1) as u32;
+        let (half, recip) = (n << 15, (1u32 << 20).div_ceil(n));
         let format = input.format;
         par_rows(input, output, |y, src, dst| {
-            // The identity term, then one bilinear sample per factor, in 8.8 fixed point: the
-            // two source rows blended vertically once per factor, then one horizontal blend per
-            // output sample (the same integers as the direct 2x2 blend, so the same result).
-            let mut acc: Vec<u32> = src.iter().map(|&v| (v as u32) << 16).collect();
-            let mut vrow = vec![0u16; w * c];
-            for (xm, ym) in &maps {
-                let (y0, y1, wy) = ym[y];
-                let (r0, r1) = (input.row(y0 as usize), input.row(y1 as usize));
-                for ((v, a), b) in vrow.iter_mut().zip(&r0[..w * c]).zip(&r1[..w * c]) {
-                    *v = *a as u16 * (256 - wy) + *b as u16 * wy;
+            // The identity terms, then one bilinear sample per factor, in 8.8 fixed point: the
+            // two source rows blended vertically once per factor (over the columns it reads),
+            // then one horizontal blend per output sample (the same integers as the direct 2x2
+            // blend, so the same result).
+            let mut acc: Vec<u32> = src.iter().map(|&v| (v as u32 * identities) << 16).collect();
+            let mut vrow = vec![0u16; (w + 1) * c];
+            for (xm, lo, hi, ym) in &maps {
+                let (y0, wy) = ym[y];
+                let (y0, y1) = (y0 as usize, (y0 as usize + 1).min(h - 1));
+                let (r0, r1) = (
+                    &input.row(y0)[lo * c..hi * c],
+                    &input.row(y1)[lo * c..hi * c],
+                );
+                if wy == 0 {
+                    for (v, a) in vrow.iter_mut().zip(r0) {
+                        *v = (*a as u16) << 8;
+                    }
+                } else {
+                    for ((v, a), b) in vrow.iter_mut().zip(r0).zip(r1) {
+                        *v = *a as u16 * (256 - wy) + *b as u16 * wy;
+                    }
                 }
                 match c {
                     1 => zoom_row::<1>(&vrow, xm, &mut acc),
@@ -343,9 +375,10 @@ impl CameraPerturbation for ZoomBlur {
                     _ => zoom_row::<4>(&vrow, xm, &mut acc),
                 }
             }
-            let scale = 1.0 / (n as f32 * 65536.0);
+            // round(acc / (n 2^16)) = floor(t / n) with t = (acc + n 2^15) >> 16 below 2^12,
+            // the division by n as a multiplication by ceil(2^20 / n) (exact in that range).
             for (d, a) in dst.iter_mut().zip(&acc) {
-                *d = (*a as f32 * scale + 0.5) as u8;
+                *d = ((((a + half) >> 16) * recip) >> 20) as u8;
             }
             copy_alpha(format, src, dst);
         });
@@ -456,14 +489,16 @@ mod tests {
                 let got = run(ZOOM_BLUR, sev, &img);
                 let (end, step) = ZOOM[sev as usize - 1];
                 let factors = zoom_factors(end, step);
-                let n = (factors.len() + 1) as f32;
+                let n = factors.len() as u32 + 1;
                 for y in 0..h {
                     for x in 0..w {
                         for ch in 0..c {
                             let mut acc = (img.view().row(y)[x * c + ch] as u32) << 16;
                             for &z in &factors {
-                                let (x0, x1, wx) = zoom_axis(w, z)[x];
-                                let (y0, y1, wy) = zoom_axis(h, z)[y];
+                                let (x0, wx) = zoom_axis(w, z)[x];
+                                let (y0, wy) = zoom_axis(h, z)[y];
+                                let x1 = (x0 + 1).min(w as u32 - 1);
+                                let y1 = (y0 + 1).min(h as u32 - 1);
                                 let p = |yy: u32, xx: u32| {
                                     img.view().row(yy as usize)[xx as usize * c + ch] as u32
                                 };
@@ -472,7 +507,8 @@ mod tests {
                                 let bot = p(y1, x0) * (256 - wx) + p(y1, x1) * wx;
                                 acc += top * (256 - wy) + bot * wy;
                             }
-                            let want = (acc as f32 / (n * 65536.0) + 0.5) as u8;
+                            // Rounded half up.
+                            let want = ((acc + n * 32768) / (n * 65536)) as u8;
                             if format.channels() == 4 && ch == 3 {
                                 continue;
                             }
