@@ -402,12 +402,25 @@ pub const PHASE_SCRAMBLE: [f32; 5] = [0.05, 0.15, 0.26, 0.38, 0.55];
 /// it against a direct DFT). The uniform draws are quantised to 4096 levels so that `cos` and `sin`
 /// come from a table built at configuration time (a phase step of at most 0.0004 rad). Frame sizes
 /// with large prime factors transform more slowly (rustfft chooses Rader / Bluestein); the FFT plans
-/// are built at configuration time.
+/// are built at configuration time, and the working buffers (about 10 bytes per pixel per colour
+/// channel) are kept from frame to frame.
 pub struct PhaseScrambling {
     seed: u64,
     plan: FftPlan,
     /// `(cos, sin)` of `s pi (i + 0.5) / 4096` for the 4096 quantised draws.
     trig: Vec<(f32, f32)>,
+    /// Working buffers of finished channels, reused by the next ones (a frame's spectra are tens
+    /// of megabytes: fresh pages each time cost more than some of the transforms).
+    spare: std::sync::Mutex<Vec<Buffers>>,
+}
+
+/// The working buffers of one channel: its half spectrum row-major and column-major, and its
+/// phase draws.
+#[derive(Default)]
+struct Buffers {
+    spec: Vec<rustfft::num_complex::Complex32>,
+    cols: Vec<rustfft::num_complex::Complex32>,
+    field: Vec<u16>,
 }
 
 /// Bits of one quantised phase draw.
@@ -471,24 +484,25 @@ impl PhaseScrambling {
                     (t.cos() as f32, t.sin() as f32)
                 })
                 .collect(),
+            spare: std::sync::Mutex::new(Vec::new()),
         }
     }
 
-    /// The quantised uniform draws of `channel` for frame `seq`, one per frequency bin (h x w,
-    /// row-major): draw `q` stands for the phase `s pi (q + 0.5) / 4096`.
-    fn phase_field(&self, seq: u64, channel: usize) -> Vec<u16> {
+    /// The quantised uniform draws of `channel` for frame `seq` into `field`, one per frequency
+    /// bin, column-major (bin (ky, kx) at `kx h + ky`, one random stream per column): draw `q`
+    /// stands for the phase `s pi (q + 0.5) / 4096`.
+    fn phase_field(&self, seq: u64, channel: usize, field: &mut Vec<u16>) {
         let FftPlan { w, h, .. } = self.plan;
-        let mut field = vec![0u16; w * h];
-        for (ky, row) in field.chunks_exact_mut(w).enumerate() {
-            let mut rng = super::ops::row_rng(self.seed, seq, 0xF2 + ((channel as u64) << 32), ky);
-            for quad in row.chunks_mut(4) {
+        field.resize(w * h, 0);
+        for (kx, col) in field.chunks_exact_mut(h).enumerate() {
+            let mut rng = super::ops::row_rng(self.seed, seq, 0xF2 + ((channel as u64) << 32), kx);
+            for quad in col.chunks_mut(4) {
                 let bits = rng.next_u64();
                 for (i, q) in quad.iter_mut().enumerate() {
                     *q = (bits >> (16 * i + 16 - PHASE_BITS as usize)) as u16 & 0xFFF;
                 }
             }
         }
-        field
     }
 
     /// Scrambles one channel plane (h x w, row-major) in place.
@@ -497,8 +511,16 @@ impl PhaseScrambling {
         let FftPlan { w, h, .. } = self.plan;
         let wh = w / 2 + 1;
         let zero = Complex32::new(0.0, 0.0);
+        let mut buffers = self
+            .spare
+            .lock()
+            .map(|mut s| s.pop())
+            .ok()
+            .flatten()
+            .unwrap_or_default();
+        let Buffers { spec, cols, field } = &mut buffers;
         // Rows: real to complex.
-        let mut spec = vec![zero; h * wh];
+        spec.resize(h * wh, zero);
         let mut scratch = self.plan.r2c.make_scratch_vec();
         for (row, out) in plane.chunks_exact_mut(w).zip(spec.chunks_exact_mut(wh)) {
             self.plan
@@ -507,8 +529,8 @@ impl PhaseScrambling {
                 .expect("sizes match the plan");
         }
         // Columns: transpose so each column is contiguous, forward FFT of all columns at once.
-        let mut cols = vec![zero; wh * h];
-        transpose(&spec, &mut cols, h, wh);
+        cols.resize(wh * h, zero);
+        transpose(spec, cols, h, wh);
         let len = self
             .plan
             .col_fwd
@@ -517,30 +539,31 @@ impl PhaseScrambling {
         let mut col_scratch = vec![zero; len];
         self.plan
             .col_fwd
-            .process_with_scratch(&mut cols, &mut col_scratch);
-        // Multiply by M_k = (e^(i theta_k) + e^(-i theta_-k)) / 2, a few columns at a time so that
-        // the phase rows and the columns are both read in order.
-        let field = self.phase_field(seq, channel);
-        const B: usize = 8;
-        for kx0 in (0..wh).step_by(B) {
-            let kx1 = (kx0 + B).min(wh);
-            for ky in 0..h {
-                let here = &field[ky * w..(ky + 1) * w];
-                let nky = (h - ky) % h;
-                let there = &field[nky * w..(nky + 1) * w];
-                for kx in kx0..kx1 {
-                    let (a, b) = (
-                        self.trig[here[kx] as usize],
-                        self.trig[there[(w - kx) % w] as usize],
-                    );
-                    cols[kx * h + ky] *= Complex32::new((a.0 + b.0) * 0.5, (a.1 - b.1) * 0.5);
-                }
+            .process_with_scratch(cols, &mut col_scratch);
+        // Multiply by M_k = (e^(i theta_k) + e^(-i theta_-k)) / 2, column by column: bin (ky, kx)
+        // pairs with (-ky, -kx), which is column -kx read backwards from ky = 1.
+        self.phase_field(seq, channel, field);
+        let m = |a: u16, b: u16| {
+            let (a, b) = (self.trig[a as usize], self.trig[b as usize]);
+            Complex32::new((a.0 + b.0) * 0.5, (a.1 - b.1) * 0.5)
+        };
+        for (kx, col) in cols.chunks_exact_mut(h).enumerate() {
+            let here = &field[kx * h..(kx + 1) * h];
+            let nkx = (w - kx) % w;
+            let there = &field[nkx * h..(nkx + 1) * h];
+            col[0] *= m(here[0], there[0]);
+            for ((v, &a), &b) in col[1..]
+                .iter_mut()
+                .zip(&here[1..])
+                .zip(there[1..].iter().rev())
+            {
+                *v *= m(a, b);
             }
         }
         self.plan
             .col_inv
-            .process_with_scratch(&mut cols, &mut col_scratch);
-        transpose(&cols, &mut spec, wh, h);
+            .process_with_scratch(cols, &mut col_scratch);
+        transpose(cols, spec, wh, h);
         // The DC and Nyquist bins of a real signal's rows must be real for the inverse transform.
         let mut scratch = self.plan.c2r.make_scratch_vec();
         let norm = 1.0 / (w * h) as f32;
@@ -556,6 +579,9 @@ impl PhaseScrambling {
             for v in out.iter_mut() {
                 *v *= norm;
             }
+        }
+        if let Ok(mut spare) = self.spare.lock() {
+            spare.push(buffers);
         }
     }
 }
@@ -720,9 +746,10 @@ mod tests {
         for (w, h) in [(6usize, 5usize), (7, 4)] {
             let p = PhaseScrambling::new(3, w, h, 0.55);
             let x: Vec<f64> = (0..w * h).map(|i| ((i * 37) % 251) as f64).collect();
-            let field = p.phase_field(9, 1);
+            let mut field = Vec::new();
+            p.phase_field(9, 1, &mut field);
             let theta = |ky: usize, kx: usize| {
-                let (c, s) = p.trig[field[ky * w + kx] as usize];
+                let (c, s) = p.trig[field[kx * h + ky] as usize];
                 (s as f64).atan2(c as f64)
             };
             let tau = std::f64::consts::TAU;
