@@ -267,7 +267,9 @@ pub fn zoom_factors(end: f64, step: f64) -> Vec<f64> {
 /// where `Z_z` zooms the image by z about its centre (a centre crop of 1/z of the size, bilinearly
 /// upscaled, as `scipy.ndimage.zoom` order 1 does). z = 1 is in every list, as in the reference.
 /// Computed in one pass: each output pixel averages N + 1 bilinear samples at precomputed
-/// coordinates (the zoom maps are separable, so they are one column table and one row table per z).
+/// coordinates (the zoom maps are separable, so they are one column table and one row table per
+/// z), in 8.8 fixed point, the average rounded half up. Per factor and row the two source rows are
+/// blended vertically over the columns the crop reads, then horizontally (see [`ZoomTaps`]).
 pub struct ZoomBlur {
     factors: Vec<f64>,
 }
@@ -297,12 +299,85 @@ fn zoom_axis(n: usize, z: f64) -> Vec<AxisTap> {
         .collect()
 }
 
-/// Adds one horizontally blended sample per output pixel of `vrow` (vertically blended, 8.8,
-/// with one spare pixel at the end so that the next column always exists; `xm` holds the offset of
-/// each output pixel's first sample and the weight of the second): `a + (b - a) wx` with `a`
-/// scaled by 256, in wrapping 32-bit arithmetic (the total is positive and below 2^32, so it
-/// comes out exact).
-fn zoom_row<const C: usize>(vrow: &[u16], xm: &[(u32, i32)], acc: &mut [u32]) {
+/// The horizontal taps of one zoom factor over a row of `c`-byte pixels, as runs of output pixels
+/// whose first source pixel is at a constant offset (a zoom by z close to 1 keeps that offset for
+/// about 1 / (1 - 1/z) pixels), so that each run is a blend of two contiguous slices.
+/// Where the runs are short (strong zooms) the taps are taken pixel by pixel instead.
+struct ZoomTaps {
+    /// (first sample, end sample, offset of the source sample from the output sample) per run,
+    /// in samples of the crop row; empty when the taps go pixel by pixel.
+    runs: Vec<(usize, usize, isize)>,
+    /// The weight of the second source pixel (1/256) of each output sample (runs).
+    weights: Vec<i32>,
+    /// Per output pixel: the offset of its first source sample and the weight of the second.
+    pixels: Vec<(u32, i32)>,
+}
+
+impl ZoomTaps {
+    fn new(xm: &[AxisTap], lo: usize, c: usize) -> Self {
+        let mut runs: Vec<(usize, usize, isize)> = Vec::new();
+        for (x, &(x0, _)) in xm.iter().enumerate() {
+            let off = (x0 as isize - lo as isize - x as isize) * c as isize;
+            match runs.last_mut() {
+                Some(run) if run.2 == off => run.1 += c,
+                _ => runs.push((x * c, x * c + c, off)),
+            }
+        }
+        // Runs pay off from about 8 pixels on.
+        if runs.len() * 8 > xm.len() {
+            let pixels = xm
+                .iter()
+                .map(|&(x0, wx)| (((x0 as usize - lo) * c) as u32, wx as i32))
+                .collect();
+            return ZoomTaps {
+                runs: Vec::new(),
+                weights: Vec::new(),
+                pixels,
+            };
+        }
+        let weights = xm
+            .iter()
+            .flat_map(|&(_, wx)| std::iter::repeat_n(wx as i32, c))
+            .collect();
+        ZoomTaps {
+            runs,
+            weights,
+            pixels: Vec::new(),
+        }
+    }
+
+    /// Adds one horizontally blended sample per output sample of `vrow` (vertically blended,
+    /// 8.8, with one spare pixel at the end so that the next column always exists): `a + (b -
+    /// a) wx` with `a` scaled by 256, in wrapping 32-bit arithmetic (the total is positive and
+    /// below 2^32, so it comes out exact).
+    fn add(&self, vrow: &[u16], c: usize, acc: &mut [u32]) {
+        if self.runs.is_empty() {
+            match c {
+                1 => zoom_pixels::<1>(vrow, &self.pixels, acc),
+                3 => zoom_pixels::<3>(vrow, &self.pixels, acc),
+                _ => zoom_pixels::<4>(vrow, &self.pixels, acc),
+            }
+            return;
+        }
+        for &(j0, j1, off) in &self.runs {
+            let base = (j0 as isize + off) as usize;
+            let n = j1 - j0;
+            let (a, b) = (&vrow[base..base + n], &vrow[base + c..base + c + n]);
+            for (((o, &a), &b), &wx) in acc[j0..j1]
+                .iter_mut()
+                .zip(a)
+                .zip(b)
+                .zip(&self.weights[j0..j1])
+            {
+                let (a, b) = (a as i32, b as i32);
+                *o = o.wrapping_add(((a << 8) + (b - a) * wx) as u32);
+            }
+        }
+    }
+}
+
+/// [`ZoomTaps::add`] pixel by pixel, `C` samples each.
+fn zoom_pixels<const C: usize>(vrow: &[u16], xm: &[(u32, i32)], acc: &mut [u32]) {
     for (out, &(i, wx)) in acc.chunks_exact_mut(C).zip(xm) {
         let two = &vrow[i as usize..i as usize + 2 * C];
         let (p, q): (&[u16; C], &[u16; C]) = (
@@ -326,8 +401,7 @@ impl CameraPerturbation for ZoomBlur {
         // Per factor: column taps, the columns they read (lo..hi), row taps. z = 1 is the
         // identity and is added as such.
         let identities = self.factors.iter().filter(|&&z| z == 1.0).count() as u32 + 1;
-        type Taps = Vec<(u32, i32)>;
-        let maps: Vec<(Taps, usize, usize, Vec<AxisTap>)> = self
+        let maps: Vec<(ZoomTaps, usize, usize, Vec<AxisTap>)> = self
             .factors
             .iter()
             .filter(|&&z| z != 1.0)
@@ -335,12 +409,7 @@ impl CameraPerturbation for ZoomBlur {
                 let xm = zoom_axis(w, z);
                 let lo = xm.first().map_or(0, |t| t.0 as usize);
                 let hi = xm.last().map_or(0, |t| t.0 as usize + 2).min(w);
-                // Offsets into the blended crop row.
-                let taps = xm
-                    .iter()
-                    .map(|&(x0, wx)| (((x0 as usize - lo) * c) as u32, wx as i32))
-                    .collect();
-                (taps, lo, hi, zoom_axis(h, z))
+                (ZoomTaps::new(&xm, lo, c), lo, hi, zoom_axis(h, z))
             })
             .collect();
         let n = (self.factors.len() + 1) as u32;
@@ -369,11 +438,7 @@ impl CameraPerturbation for ZoomBlur {
                         *v = *a as u16 * (256 - wy) + *b as u16 * wy;
                     }
                 }
-                match c {
-                    1 => zoom_row::<1>(&vrow, xm, &mut acc),
-                    3 => zoom_row::<3>(&vrow, xm, &mut acc),
-                    _ => zoom_row::<4>(&vrow, xm, &mut acc),
-                }
+                xm.add(&vrow, c, &mut acc);
             }
             // round(acc / (n 2^16)) = floor(t / n) with t = (acc + n 2^15) >> 16 below 2^12,
             // the division by n as a multiplication by ceil(2^20 / n) (exact in that range).
