@@ -269,7 +269,7 @@ pub fn zoom_factors(end: f64, step: f64) -> Vec<f64> {
 /// Computed in one pass: each output pixel averages N + 1 bilinear samples at precomputed
 /// coordinates (the zoom maps are separable, so they are one column table and one row table per
 /// z), in 8.8 fixed point, the average rounded half up. Per factor and row the two source rows are
-/// blended vertically over the columns the crop reads, then horizontally (see [`ZoomTaps`]).
+/// blended vertically over the columns the crop reads, then horizontally in runs of constant source offset.
 pub struct ZoomBlur {
     factors: Vec<f64>,
 }

@@ -121,7 +121,7 @@ pub const SHEAR_COEFFICIENT: [f64; 5] = [0.05, 0.10, 0.15, 0.20, 0.25];
 
 /// L-E1 shear: per box, four coefficients b, d, e, f ~ U(c - 0.05, c + 0.05) with independent
 /// random signs; in the normalised frame `x' = x + d y + f z`, `y' = y`, `z' = b x + e y + z` (the
-/// reference's row vector times [[1,0,b],[d,1,e],[f,0,1]]), then `normalize_gt`. A slanted,
+/// reference's row vector times `[[1,0,b],[d,1,e],[f,0,1]]`), then `normalize_gt`. A slanted,
 /// skewed object of the same footprint.
 pub struct Shear {
     seed: u64,
