@@ -41,8 +41,8 @@ pub const DEFOCUS_RADIUS: [usize; 5] = [2, 5, 6, 9, 12];
 pub struct DefocusBlur {
     /// Half-width of the disk's row at each vertical offset -r..=r.
     half_widths: Vec<usize>,
-    /// 1 / number of disk pixels.
-    norm: f32,
+    /// Number of disk pixels.
+    count: usize,
 }
 
 /// Registry constructor of C-B1.
@@ -52,10 +52,7 @@ pub const DEFOCUS: CameraBuilder = |s| {
         .map(|dy| ((r * r - dy * dy) as f64).sqrt().floor() as usize)
         .collect();
     let count: usize = half_widths.iter().map(|w| 2 * w + 1).sum();
-    Ok(Box::new(DefocusBlur {
-        half_widths,
-        norm: 1.0 / count as f32,
-    }))
+    Ok(Box::new(DefocusBlur { half_widths, count }))
 };
 
 impl CameraPerturbation for DefocusBlur {
@@ -88,31 +85,48 @@ impl CameraPerturbation for DefocusBlur {
         // Disk rows summed in u16 before widening: as many as fit 2^16 at the widest segment.
         let per_group = (u16::MAX as usize / ((2 * r + 1) * 255)).max(1);
         let format = input.format;
+        let count = self.count as u64;
+        let (half, recip) = ((count / 2) as u32, (1u64 << 32).div_ceil(count));
         par_rows(input, output, |y, src, dst| {
             let mut acc = vec![0u32; w * c];
             let mut part = vec![0u16; w * c];
-            let rows: Vec<(usize, usize)> = self
-                .half_widths
-                .iter()
-                .enumerate()
-                .map(|(k, &hw)| (reflect101(y as i64 + k as i64 - r as i64, h), hw))
+            // Rows dy and -dy have the same half-width: they are summed together. Segment
+            // [x - hw, x + hw] of the unpadded row = padded [x + pad - hw, x + pad + hw].
+            let pre = |dy: i64| {
+                let sy = reflect101(y as i64 + dy, h);
+                &prefix[sy * (pw + 1) * c..(sy + 1) * (pw + 1) * c]
+            };
+            let pairs: Vec<(i64, usize)> = (0..=r as i64)
+                .map(|dy| (dy, self.half_widths[r + dy as usize]))
                 .collect();
-            for group in rows.chunks(per_group) {
+            for group in pairs.chunks((per_group / 2).max(1)) {
                 part.fill(0);
-                for &(sy, hw) in group {
-                    let pre = &prefix[sy * (pw + 1) * c..(sy + 1) * (pw + 1) * c];
-                    // Segment [x - hw, x + hw] of the unpadded row = padded [x + pad - hw, x + pad + hw].
-                    let (lo, hi) = (&pre[(pad - hw) * c..], &pre[(pad + hw + 1) * c..]);
-                    for ((p, a), b) in part.iter_mut().zip(&hi[..w * c]).zip(&lo[..w * c]) {
-                        *p = p.wrapping_add(a.wrapping_sub(*b));
+                for &(dy, hw) in group {
+                    let (lo, hi) = ((pad - hw) * c, (pad + hw + 1) * c);
+                    let (a, b) = (pre(dy), pre(-dy));
+                    if dy == 0 {
+                        for ((p, u), v) in part.iter_mut().zip(&a[hi..hi + w * c]).zip(&a[lo..]) {
+                            *p = p.wrapping_add(u.wrapping_sub(*v));
+                        }
+                        continue;
+                    }
+                    let (ahi, alo) = (&a[hi..hi + w * c], &a[lo..lo + w * c]);
+                    let (bhi, blo) = (&b[hi..hi + w * c], &b[lo..lo + w * c]);
+                    for ((((p, u), v), s), t) in part.iter_mut().zip(ahi).zip(alo).zip(bhi).zip(blo)
+                    {
+                        *p = p
+                            .wrapping_add(u.wrapping_sub(*v))
+                            .wrapping_add(s.wrapping_sub(*t));
                     }
                 }
                 for (a, p) in acc.iter_mut().zip(&part) {
                     *a += *p as u32;
                 }
             }
+            // The disk has an odd number of pixels, so no sum lies halfway between two levels:
+            // round(a / n) = (a + n / 2) / n, the division as a multiplication.
             for (d, a) in dst.iter_mut().zip(&acc) {
-                *d = (*a as f32 * self.norm + 0.5) as u8;
+                *d = (((*a + half) as u64 * recip) >> 32) as u8;
             }
             copy_alpha(format, src, dst);
         });
