@@ -191,8 +191,11 @@ pub fn canny(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> Vec<bool> 
         return Vec::new();
     }
     // Sobel, row by row: with S = up + 2 mid + down and D = down - up per column (rows clamped),
-    // gx = S[x + 1] - S[x - 1] and gy = D[x - 1] + 2 D[x] + D[x + 1] (columns clamped).
-    let mut grad = vec![(0i16, 0i16, 0i16); w * h];
+    // gx = S[x + 1] - S[x - 1] and gy = D[x - 1] + 2 D[x] + D[x + 1] (columns clamped). Each pixel
+    // keeps its L1 magnitude (at most 2040, 11 bits) and the direction its non-maximum test looks
+    // along (bits 12-13): 0 horizontal, 1 vertical, 2 and 3 the diagonals.
+    let (tg22, tg67) = (0.414_213_56f64, 2.414_213_56f64);
+    let mut grad = vec![0u16; w * h];
     grad.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
         let row = |y: usize| &gray[y * w..(y + 1) * w];
         let (up, mid, down) = (row(y.saturating_sub(1)), row(y), row((y + 1).min(h - 1)));
@@ -206,13 +209,18 @@ pub fn canny(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> Vec<bool> 
         for (x, g) in out.iter_mut().enumerate() {
             let gx = s[x + 2] - s[x];
             let gy = d[x] + 2 * d[x + 1] + d[x + 2];
-            *g = (gx, gy, gx.abs() + gy.abs());
+            // Branch-free: the direction is stored for every pixel and read only above `low`.
+            let (ax, ay) = (gx.abs() as f64, gy.abs() as f64);
+            let near_horizontal = (ay <= ax * tg22) as u16;
+            let near_vertical = (ay >= ax * tg67) as u16;
+            let diagonal = 3 - ((gx > 0) == (gy > 0)) as u16;
+            let dir = (diagonal - near_vertical * (diagonal - 1)) * (1 - near_horizontal);
+            *g = (gx.abs() + gy.abs()) as u16 | dir << 12;
         }
     });
     // Non-maximum suppression, row by row: 0 not an edge, 1 weak candidate, 2 strong. Outside
     // the image the magnitude is 0.
     let mut state = vec![0u8; w * h];
-    let (tg22, tg67) = (0.414_213_56f64, 2.414_213_56f64);
     let seeds: Vec<Vec<usize>> = state
         .par_chunks_mut(w)
         .enumerate()
@@ -223,26 +231,21 @@ pub fn canny(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> Vec<bool> 
                 if x < 0 || yy < 0 || x >= w as i64 || yy >= h as i64 {
                     0
                 } else {
-                    grad[yy as usize * w + x as usize].2 as i32
+                    (grad[yy as usize * w + x as usize] & 0xFFF) as i32
                 }
             };
             for (x, o) in out.iter_mut().enumerate() {
-                let (gx, gy, v) = grad[y * w + x];
-                let v = v as i32;
+                let g = grad[y * w + x];
+                let v = (g & 0xFFF) as i32;
                 if v <= low {
                     continue;
                 }
                 let x = x as i64;
-                let (dx, dy) = (gx as f64, gy as f64);
-                let (ax, ay) = (dx.abs(), dy.abs());
-                let is_max = if ay <= ax * tg22 {
-                    v > m(x - 1, 0) && v >= m(x + 1, 0)
-                } else if ay >= ax * tg67 {
-                    v > m(x, -1) && v >= m(x, 1)
-                } else if (dx > 0.0) == (dy > 0.0) {
-                    v > m(x - 1, -1) && v >= m(x + 1, 1)
-                } else {
-                    v > m(x + 1, -1) && v >= m(x - 1, 1)
+                let is_max = match g >> 12 {
+                    0 => v > m(x - 1, 0) && v >= m(x + 1, 0),
+                    1 => v > m(x, -1) && v >= m(x, 1),
+                    2 => v > m(x - 1, -1) && v >= m(x + 1, 1),
+                    _ => v > m(x + 1, -1) && v >= m(x - 1, 1),
                 };
                 if is_max {
                     *o = if v > high { 2 } else { 1 };
