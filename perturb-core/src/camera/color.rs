@@ -519,15 +519,24 @@ impl PhaseScrambling {
             .flatten()
             .unwrap_or_default();
         let Buffers { spec, cols, field } = &mut buffers;
-        // Rows: real to complex.
+        // Rows: real to complex. Every pass below runs in bands on the worker threads (the
+        // transforms of different rows or columns are independent).
         spec.resize(h * wh, zero);
-        let mut scratch = self.plan.r2c.make_scratch_vec();
-        for (row, out) in plane.chunks_exact_mut(w).zip(spec.chunks_exact_mut(wh)) {
-            self.plan
-                .r2c
-                .process_with_scratch(row, out, &mut scratch)
-                .expect("sizes match the plan");
-        }
+        let band = 32;
+        plane
+            .par_chunks_mut(w * band)
+            .zip(spec.par_chunks_mut(wh * band))
+            .for_each_init(
+                || self.plan.r2c.make_scratch_vec(),
+                |scratch, (rows, outs)| {
+                    for (row, out) in rows.chunks_exact_mut(w).zip(outs.chunks_exact_mut(wh)) {
+                        self.plan
+                            .r2c
+                            .process_with_scratch(row, out, scratch)
+                            .expect("sizes match the plan");
+                    }
+                },
+            );
         // Columns: transpose so each column is contiguous, forward FFT of all columns at once.
         cols.resize(wh * h, zero);
         transpose(spec, cols, h, wh);
@@ -536,10 +545,13 @@ impl PhaseScrambling {
             .col_fwd
             .get_inplace_scratch_len()
             .max(self.plan.col_inv.get_inplace_scratch_len());
-        let mut col_scratch = vec![zero; len];
-        self.plan
-            .col_fwd
-            .process_with_scratch(cols, &mut col_scratch);
+        let columns = |cols: &mut [Complex32], fft: &std::sync::Arc<dyn rustfft::Fft<f32>>| {
+            cols.par_chunks_mut(h * band).for_each_init(
+                || vec![zero; len],
+                |scratch, chunk| fft.process_with_scratch(chunk, scratch),
+            );
+        };
+        columns(cols, &self.plan.col_fwd);
         // Multiply by M_k = (e^(i theta_k) + e^(-i theta_-k)) / 2, column by column: bin (ky, kx)
         // pairs with (-ky, -kx), which is column -kx read backwards from ky = 1.
         self.phase_field(seq, channel, field);
@@ -547,7 +559,7 @@ impl PhaseScrambling {
             let (a, b) = (self.trig[a as usize], self.trig[b as usize]);
             Complex32::new((a.0 + b.0) * 0.5, (a.1 - b.1) * 0.5)
         };
-        for (kx, col) in cols.chunks_exact_mut(h).enumerate() {
+        cols.par_chunks_mut(h).enumerate().for_each(|(kx, col)| {
             let here = &field[kx * h..(kx + 1) * h];
             let nkx = (w - kx) % w;
             let there = &field[nkx * h..(nkx + 1) * h];
@@ -559,27 +571,31 @@ impl PhaseScrambling {
             {
                 *v *= m(a, b);
             }
-        }
-        self.plan
-            .col_inv
-            .process_with_scratch(cols, &mut col_scratch);
+        });
+        columns(cols, &self.plan.col_inv);
         transpose(cols, spec, wh, h);
         // The DC and Nyquist bins of a real signal's rows must be real for the inverse transform.
-        let mut scratch = self.plan.c2r.make_scratch_vec();
         let norm = 1.0 / (w * h) as f32;
-        for (row, out) in spec.chunks_exact_mut(wh).zip(plane.chunks_exact_mut(w)) {
-            row[0].im = 0.0;
-            if w % 2 == 0 {
-                row[wh - 1].im = 0.0;
-            }
-            self.plan
-                .c2r
-                .process_with_scratch(row, out, &mut scratch)
-                .expect("sizes match the plan");
-            for v in out.iter_mut() {
-                *v *= norm;
-            }
-        }
+        spec.par_chunks_mut(wh * band)
+            .zip(plane.par_chunks_mut(w * band))
+            .for_each_init(
+                || self.plan.c2r.make_scratch_vec(),
+                |scratch, (rows, outs)| {
+                    for (row, out) in rows.chunks_exact_mut(wh).zip(outs.chunks_exact_mut(w)) {
+                        row[0].im = 0.0;
+                        if w % 2 == 0 {
+                            row[wh - 1].im = 0.0;
+                        }
+                        self.plan
+                            .c2r
+                            .process_with_scratch(row, out, scratch)
+                            .expect("sizes match the plan");
+                        for v in out.iter_mut() {
+                            *v *= norm;
+                        }
+                    }
+                },
+            );
         if let Ok(mut spare) = self.spare.lock() {
             spare.push(buffers);
         }
