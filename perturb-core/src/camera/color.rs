@@ -5,6 +5,7 @@ use super::{CameraBuilder, CameraPerturbation, CameraSetup};
 use crate::error::Error;
 use crate::image::{ImageView, ImageViewMut};
 use rayon::prelude::*;
+use rustfft::num_complex::Complex32;
 
 pub(crate) fn refuse_mono(id: &'static str, s: &CameraSetup) -> Result<(), Error> {
     if s.geometry.format.is_mono() {
@@ -402,29 +403,44 @@ pub const PHASE_SCRAMBLE: [f32; 5] = [0.05, 0.15, 0.26, 0.38, 0.55];
 /// it against a direct DFT). The uniform draws are quantised to 4096 levels so that `cos` and `sin`
 /// come from a table built at configuration time (a phase step of at most 0.0004 rad). Frame sizes
 /// with large prime factors transform more slowly (rustfft chooses Rader / Bluestein); the FFT plans
-/// are built at configuration time, and the working buffers (about 10 bytes per pixel per colour
-/// channel) are kept from frame to frame.
+/// are built at configuration time, and the working buffers (about 8 bytes per pixel per colour
+/// channel) are kept from frame to frame. A frame makes three passes over memory: the row
+/// transforms, the column transforms (a block of columns is gathered, transformed, scrambled and
+/// transformed back while it sits in the cache), and the inverse row transforms, which write the
+/// output bytes directly.
 pub struct PhaseScrambling {
     seed: u64,
     plan: FftPlan,
     /// `(cos, sin)` of `s pi (i + 0.5) / 4096` for the 4096 quantised draws.
-    trig: Vec<(f32, f32)>,
-    /// Working buffers of finished channels, reused by the next ones (a frame's spectra are tens
+    trig: Box<[(f32, f32); 1 << PHASE_BITS]>,
+    /// Working buffers of finished frames, reused by the next ones (a frame's spectra are tens
     /// of megabytes: fresh pages each time cost more than some of the transforms).
     spare: std::sync::Mutex<Vec<Buffers>>,
 }
 
-/// The working buffers of one channel: its half spectrum row-major and column-major, and its
-/// phase draws.
+/// The working buffers of a frame, kept from frame to frame: the half spectra (`h x (w/2 + 1)`
+/// bins per colour channel) after the row transforms and after the column transforms, both in
+/// tiles of [`ROW_BAND`] x [`COLUMN_BLOCK`] bins so that every pass reads and writes kilobytes at
+/// a time (a column read across a row-major spectrum touches a page per row).
+///
+/// `rows` holds bands of rows; a band holds each channel's tiles left to right, each tile
+/// row-major. `cols` holds each channel's tiles of columns, each tile row-major over all rows
+/// (rounded up to whole bands).
 #[derive(Default)]
 struct Buffers {
-    spec: Vec<rustfft::num_complex::Complex32>,
-    cols: Vec<rustfft::num_complex::Complex32>,
-    field: Vec<u16>,
+    rows: Vec<Complex32>,
+    cols: Vec<Complex32>,
 }
 
 /// Bits of one quantised phase draw.
 const PHASE_BITS: u32 = 12;
+
+/// Columns of the half spectrum transformed together: a block is gathered from the row
+/// transforms' tiles, transformed, scrambled and transformed back while it sits in the cache.
+const COLUMN_BLOCK: usize = 16;
+
+/// Rows per task of the row transforms.
+const ROW_BAND: usize = 16;
 
 struct FftPlan {
     w: usize,
@@ -444,20 +460,6 @@ pub const PHASE_SCRAMBLING: CameraBuilder = |s| {
         PHASE_SCRAMBLE[s.level()],
     )))
 };
-
-/// Transposes the `rows x cols` matrix `src` into `dst` (`cols x rows`), in cache-sized blocks.
-fn transpose<T: Copy>(src: &[T], dst: &mut [T], rows: usize, cols: usize) {
-    const B: usize = 32;
-    for r0 in (0..rows).step_by(B) {
-        for c0 in (0..cols).step_by(B) {
-            for r in r0..(r0 + B).min(rows) {
-                for c in c0..(c0 + B).min(cols) {
-                    dst[c * rows + r] = src[r * cols + c];
-                }
-            }
-        }
-    }
-}
 
 impl PhaseScrambling {
     /// Plans the transforms of a `w x h` frame and tabulates the phases for amplitude `s` (in
@@ -483,128 +485,203 @@ impl PhaseScrambling {
                     let t = amp * (i as f64 + 0.5) / levels as f64;
                     (t.cos() as f32, t.sin() as f32)
                 })
-                .collect(),
+                .collect::<Vec<_>>()
+                .try_into()
+                .expect("one entry per level"),
             spare: std::sync::Mutex::new(Vec::new()),
         }
     }
 
-    /// The quantised uniform draws of `channel` for frame `seq` into `field`, one per frequency
-    /// bin, column-major (bin (ky, kx) at `kx h + ky`, one random stream per column): draw `q`
-    /// stands for the phase `s pi (q + 0.5) / 4096`.
-    fn phase_field(&self, seq: u64, channel: usize, field: &mut Vec<u16>) {
-        let FftPlan { w, h, .. } = self.plan;
-        field.resize(w * h, 0);
-        for (kx, col) in field.chunks_exact_mut(h).enumerate() {
-            let mut rng = super::ops::row_rng(self.seed, seq, 0xF2 + ((channel as u64) << 32), kx);
-            for quad in col.chunks_mut(4) {
-                let bits = rng.next_u64();
-                for (i, q) in quad.iter_mut().enumerate() {
-                    *q = (bits >> (16 * i + 16 - PHASE_BITS as usize)) as u16 & 0xFFF;
-                }
-            }
+    /// The quantised uniform draws of column `kx` of the full spectrum of `channel` for frame
+    /// `seq`, one per row (`out` is `h` long; one random stream per column): draw `q` stands for
+    /// the phase `s pi (q + 0.5) / 4096`.
+    fn column_draws(&self, seq: u64, channel: usize, kx: usize, out: &mut [u16]) {
+        let mut rng = super::ops::row_rng(self.seed, seq, 0xF2 + ((channel as u64) << 32), kx);
+        // The top PHASE_BITS of each 16-bit quarter of a 64-bit draw, low quarter first.
+        let quarters = |bits: u64| {
+            let q = |i: u32| (bits >> (16 * i + 16 - PHASE_BITS)) as u16 & 0xFFF;
+            [q(0), q(1), q(2), q(3)]
+        };
+        let mut quads = out.chunks_exact_mut(4);
+        for quad in &mut quads {
+            quad.copy_from_slice(&quarters(rng.next_u64()));
+        }
+        let rest = quads.into_remainder();
+        if !rest.is_empty() {
+            let n = rest.len();
+            rest.copy_from_slice(&quarters(rng.next_u64())[..n]);
         }
     }
 
-    /// Scrambles one channel plane (h x w, row-major) in place.
-    fn scramble(&self, plane: &mut [f32], seq: u64, channel: usize) {
-        use rustfft::num_complex::Complex32;
+    /// The tiling of the half spectrum: (tiles of [`COLUMN_BLOCK`] columns, bands of
+    /// [`ROW_BAND`] rows, rows rounded up to whole bands).
+    fn tiling(&self) -> (usize, usize, usize) {
         let FftPlan { w, h, .. } = self.plan;
-        let wh = w / 2 + 1;
+        let nt = (w / 2 + 1).div_ceil(COLUMN_BLOCK);
+        let nb = h.div_ceil(ROW_BAND);
+        (nt, nb, nb * ROW_BAND)
+    }
+
+    /// Real FFT of every row of `nc` channels into `buf.rows`; `load(y, lines)` writes row `y`
+    /// of each channel into `lines` (`nc` lines of `w` after one another). Bands of rows run on
+    /// the worker threads.
+    fn forward_rows(
+        &self,
+        nc: usize,
+        buf: &mut Buffers,
+        load: &(dyn Fn(usize, &mut [f32]) + Sync),
+    ) {
+        let FftPlan { w, h, .. } = self.plan;
+        let (nt, nb, hp) = self.tiling();
+        let (t, r) = (COLUMN_BLOCK, ROW_BAND);
         let zero = Complex32::new(0.0, 0.0);
-        let mut buffers = self
-            .spare
-            .lock()
-            .map(|mut s| s.pop())
-            .ok()
-            .flatten()
-            .unwrap_or_default();
-        let Buffers { spec, cols, field } = &mut buffers;
-        // Rows: real to complex. Every pass below runs in bands on the worker threads (the
-        // transforms of different rows or columns are independent).
-        spec.resize(h * wh, zero);
-        let band = 32;
-        plane
-            .par_chunks_mut(w * band)
-            .zip(spec.par_chunks_mut(wh * band))
+        buf.rows.resize(nb * nc * nt * r * t, zero);
+        buf.cols.resize(nc * nt * hp * t, zero);
+        buf.rows
+            .par_chunks_mut(nc * nt * r * t)
+            .enumerate()
             .for_each_init(
-                || self.plan.r2c.make_scratch_vec(),
-                |scratch, (rows, outs)| {
-                    for (row, out) in rows.chunks_exact_mut(w).zip(outs.chunks_exact_mut(wh)) {
-                        self.plan
-                            .r2c
-                            .process_with_scratch(row, out, scratch)
-                            .expect("sizes match the plan");
+                || {
+                    let r2c = &self.plan.r2c;
+                    (
+                        vec![0f32; nc * w],
+                        r2c.make_output_vec(),
+                        r2c.make_scratch_vec(),
+                    )
+                },
+                |(lines, spec, scratch), (i, band)| {
+                    let y0 = i * r;
+                    for j in 0..r.min(h - y0) {
+                        load(y0 + j, lines);
+                        for (line, tiles) in lines
+                            .chunks_exact_mut(w)
+                            .zip(band.chunks_exact_mut(nt * r * t))
+                        {
+                            self.plan
+                                .r2c
+                                .process_with_scratch(line, spec, scratch)
+                                .expect("sizes match the plan");
+                            for (tile, part) in tiles.chunks_exact_mut(r * t).zip(spec.chunks(t)) {
+                                tile[j * t..j * t + part.len()].copy_from_slice(part);
+                            }
+                        }
                     }
                 },
             );
-        // Columns: transpose so each column is contiguous, forward FFT of all columns at once.
-        cols.resize(wh * h, zero);
-        transpose(spec, cols, h, wh);
+    }
+
+    /// Column transforms of `nc` channels, one tile of [`COLUMN_BLOCK`] columns at a time:
+    /// gather the tile from `buf.rows` into a column-major block, FFT it, multiply by the
+    /// scrambling multiplier, inverse FFT, and store it row by row into its tile of `buf.cols`.
+    /// The block stays in the cache through all of it.
+    ///
+    /// The multiplier of bin (ky, kx) is `M = (e^(i theta(ky, kx)) + e^(-i theta(-ky, -kx))) /
+    /// 2`; the partner bin lies in column `-kx` of the full spectrum, read backwards from ky = 1.
+    fn scramble_columns(&self, nc: usize, buf: &mut Buffers, seq: u64) {
+        let FftPlan { w, h, .. } = self.plan;
+        let wh = w / 2 + 1;
+        let (nt, _, hp) = self.tiling();
+        let (t, r) = (COLUMN_BLOCK, ROW_BAND);
+        let zero = Complex32::new(0.0, 0.0);
         let len = self
             .plan
             .col_fwd
             .get_inplace_scratch_len()
             .max(self.plan.col_inv.get_inplace_scratch_len());
-        let columns = |cols: &mut [Complex32], fft: &std::sync::Arc<dyn rustfft::Fft<f32>>| {
-            cols.par_chunks_mut(h * band).for_each_init(
-                || vec![zero; len],
-                |scratch, chunk| fft.process_with_scratch(chunk, scratch),
-            );
-        };
-        columns(cols, &self.plan.col_fwd);
-        // Multiply by M_k = (e^(i theta_k) + e^(-i theta_-k)) / 2, column by column: bin (ky, kx)
-        // pairs with (-ky, -kx), which is column -kx read backwards from ky = 1.
-        self.phase_field(seq, channel, field);
         let m = |a: u16, b: u16| {
-            let (a, b) = (self.trig[a as usize], self.trig[b as usize]);
+            let mask = |q: u16| (q & 0xFFF) as usize;
+            let (a, b) = (self.trig[mask(a)], self.trig[mask(b)]);
             Complex32::new((a.0 + b.0) * 0.5, (a.1 - b.1) * 0.5)
         };
-        cols.par_chunks_mut(h).enumerate().for_each(|(kx, col)| {
-            let here = &field[kx * h..(kx + 1) * h];
-            let nkx = (w - kx) % w;
-            let there = &field[nkx * h..(nkx + 1) * h];
-            col[0] *= m(here[0], there[0]);
-            for ((v, &a), &b) in col[1..]
-                .iter_mut()
-                .zip(&here[1..])
-                .zip(there[1..].iter().rev())
-            {
-                *v *= m(a, b);
-            }
-        });
-        columns(cols, &self.plan.col_inv);
-        transpose(cols, spec, wh, h);
-        // The DC and Nyquist bins of a real signal's rows must be real for the inverse transform.
-        let norm = 1.0 / (w * h) as f32;
-        spec.par_chunks_mut(wh * band)
-            .zip(plane.par_chunks_mut(w * band))
-            .for_each_init(
-                || self.plan.c2r.make_scratch_vec(),
-                |scratch, (rows, outs)| {
-                    for (row, out) in rows.chunks_exact_mut(wh).zip(outs.chunks_exact_mut(w)) {
-                        row[0].im = 0.0;
-                        if w % 2 == 0 {
-                            row[wh - 1].im = 0.0;
-                        }
-                        self.plan
-                            .c2r
-                            .process_with_scratch(row, out, scratch)
-                            .expect("sizes match the plan");
-                        for v in out.iter_mut() {
-                            *v *= norm;
+        let Buffers { rows, cols } = buf;
+        let rows: &[Complex32] = rows;
+        cols.par_chunks_mut(hp * t).enumerate().for_each_init(
+            || {
+                (
+                    vec![zero; t * h],
+                    vec![zero; len],
+                    vec![0u16; h],
+                    vec![0u16; h],
+                )
+            },
+            |(block, scratch, here, there), (i, tile)| {
+                let (k, b) = (i / nt, i % nt);
+                let x0 = b * t;
+                let n = t.min(wh - x0);
+                let block = &mut block[..n * h];
+                for (band, src) in rows.chunks_exact(nc * nt * r * t).enumerate() {
+                    let src = &src[i * r * t..(i + 1) * r * t];
+                    for (j, row) in src.chunks_exact(t).enumerate().take(h - band * r) {
+                        for (c, &v) in row[..n].iter().enumerate() {
+                            block[c * h + band * r + j] = v;
                         }
                     }
-                },
-            );
-        if let Ok(mut spare) = self.spare.lock() {
-            spare.push(buffers);
+                }
+                self.plan.col_fwd.process_with_scratch(block, scratch);
+                for (j, col) in block.chunks_exact_mut(h).enumerate() {
+                    let kx = x0 + j;
+                    self.column_draws(seq, k, kx, here);
+                    self.column_draws(seq, k, (w - kx) % w, there);
+                    col[0] *= m(here[0], there[0]);
+                    for ((v, &a), &b) in col[1..]
+                        .iter_mut()
+                        .zip(&here[1..])
+                        .zip(there[1..].iter().rev())
+                    {
+                        *v *= m(a, b);
+                    }
+                }
+                self.plan.col_inv.process_with_scratch(block, scratch);
+                for (y, row) in tile.chunks_exact_mut(t).take(h).enumerate() {
+                    for (c, v) in row[..n].iter_mut().enumerate() {
+                        *v = block[c * h + y];
+                    }
+                }
+            },
+        );
+    }
+
+    /// Inverse real FFT of rows `y0 .. y0 + out.len() / w` (at most one band, `y0` a multiple of
+    /// [`ROW_BAND`]) of channel `k`'s scrambled spectrum into `out`, not normalised (scaled by
+    /// `w h`); `line` and `scratch` are working space.
+    fn inverse_rows(
+        &self,
+        buf: &Buffers,
+        k: usize,
+        y0: usize,
+        out: &mut [f32],
+        (line, scratch): &mut (Vec<Complex32>, Vec<Complex32>),
+    ) {
+        let w = self.plan.w;
+        let wh = w / 2 + 1;
+        let (nt, _, hp) = self.tiling();
+        let t = COLUMN_BLOCK;
+        let n = out.len() / w;
+        line.resize(n * wh, Complex32::new(0.0, 0.0));
+        let tiles = buf.cols.chunks_exact(hp * t).skip(k * nt).take(nt);
+        for (tile, x0) in tiles.zip((0..wh).step_by(t)) {
+            let cols = t.min(wh - x0);
+            for (r, src) in tile[y0 * t..(y0 + n) * t].chunks_exact(t).enumerate() {
+                line[r * wh + x0..r * wh + x0 + cols].copy_from_slice(&src[..cols]);
+            }
+        }
+        for (row, out) in line.chunks_exact_mut(wh).zip(out.chunks_exact_mut(w)) {
+            // The DC and Nyquist bins of a real signal's rows must be real for the inverse.
+            row[0].im = 0.0;
+            if w.is_multiple_of(2) {
+                row[wh - 1].im = 0.0;
+            }
+            self.plan
+                .c2r
+                .process_with_scratch(row, out, scratch)
+                .expect("sizes match the plan");
         }
     }
 }
 
 impl CameraPerturbation for PhaseScrambling {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        let (w, h) = (input.width as usize, input.height as usize);
+        let w = input.width as usize;
         let format = input.format;
         let c = format.channels();
         let colour: Vec<usize> = if format.is_mono() {
@@ -612,29 +689,64 @@ impl CameraPerturbation for PhaseScrambling {
         } else {
             format.rgb_offsets().to_vec()
         };
-        let planes: Vec<Vec<f32>> = colour
-            .par_iter()
-            .enumerate()
-            .map(|(k, &ch)| {
-                let mut plane = vec![0f32; w * h];
-                for (y, row) in plane.chunks_exact_mut(w).enumerate() {
-                    for (d, p) in row.iter_mut().zip(input.row(y).chunks_exact(c)) {
-                        *d = p[ch] as f32;
-                    }
+        let nc = colour.len();
+        let mut buf = {
+            let mut spare = self.spare.lock().unwrap_or_else(|e| e.into_inner());
+            spare.pop().unwrap_or_default()
+        };
+        // Colour channels are read and written in one pass over each row (three strided passes
+        // cost more than the row transforms).
+        let one = |p: &[u8], k: usize| p[colour[k]];
+        self.forward_rows(nc, &mut buf, &|y, lines| {
+            let src = input.row(y).chunks_exact(c);
+            if nc == 3 {
+                let (l0, rest) = lines.split_at_mut(w);
+                let (l1, l2) = rest.split_at_mut(w);
+                for (((p, a), b), d) in src.zip(l0).zip(l1).zip(l2) {
+                    (*a, *b, *d) = (one(p, 0) as f32, one(p, 1) as f32, one(p, 2) as f32);
                 }
-                self.scramble(&mut plane, seq, k);
-                plane
-            })
-            .collect();
-        par_rows(input, output, |y, src, dst| {
-            for (plane, &ch) in planes.iter().zip(&colour) {
-                let row = &plane[y * w..(y + 1) * w];
-                for (d, v) in dst.chunks_exact_mut(c).zip(row) {
-                    d[ch] = (v + 0.5).clamp(0.0, 255.0) as u8;
+            } else {
+                for (d, p) in lines.iter_mut().zip(src) {
+                    *d = one(p, 0) as f32;
                 }
             }
-            super::ops::copy_alpha(format, src, dst);
         });
+        self.scramble_columns(nc, &mut buf, seq);
+        let norm = 1.0 / (w * self.plan.h) as f32;
+        let byte = |v: f32| (v * norm + 0.5).clamp(0.0, 255.0) as u8;
+        let mut rows = output.rows_mut();
+        rows.par_chunks_mut(ROW_BAND).enumerate().for_each_init(
+            || {
+                let work = (Vec::new(), self.plan.c2r.make_scratch_vec());
+                (vec![0f32; nc * ROW_BAND * w], work)
+            },
+            |(planes, work), (i, band)| {
+                let (y0, n) = (i * ROW_BAND, band.len());
+                for (k, plane) in planes.chunks_exact_mut(ROW_BAND * w).enumerate() {
+                    self.inverse_rows(&buf, k, y0, &mut plane[..n * w], work);
+                }
+                let plane = |k: usize, r: usize| &planes[(k * ROW_BAND + r) * w..][..w];
+                for (r, dst) in band.iter_mut().enumerate() {
+                    let px = dst.chunks_exact_mut(c);
+                    if nc == 3 {
+                        let rgb = plane(0, r).iter().zip(plane(1, r)).zip(plane(2, r));
+                        for (d, ((&a, &b), &e)) in px.zip(rgb) {
+                            (d[colour[0]], d[colour[1]], d[colour[2]]) =
+                                (byte(a), byte(b), byte(e));
+                        }
+                    } else {
+                        for (d, &v) in px.zip(plane(0, r)) {
+                            d[colour[0]] = byte(v);
+                        }
+                    }
+                    super::ops::copy_alpha(format, input.row(y0 + r), dst);
+                }
+            },
+        );
+        self.spare
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(buf);
     }
 }
 
@@ -762,8 +874,10 @@ mod tests {
         for (w, h) in [(6usize, 5usize), (7, 4)] {
             let p = PhaseScrambling::new(3, w, h, 0.55);
             let x: Vec<f64> = (0..w * h).map(|i| ((i * 37) % 251) as f64).collect();
-            let mut field = Vec::new();
-            p.phase_field(9, 1, &mut field);
+            let mut field = vec![0u16; w * h];
+            for (kx, col) in field.chunks_exact_mut(h).enumerate() {
+                p.column_draws(9, 0, kx, col);
+            }
             let theta = |ky: usize, kx: usize| {
                 let (c, s) = p.trig[field[kx * h + ky] as usize];
                 (s as f64).atan2(c as f64)
@@ -785,8 +899,18 @@ mod tests {
                     spec[ky * w + kx] = (re * t.cos() - im * t.sin(), re * t.sin() + im * t.cos());
                 }
             }
-            let mut plane: Vec<f32> = x.iter().map(|&v| v as f32).collect();
-            p.scramble(&mut plane, 9, 1);
+            let mut buf = Buffers::default();
+            p.forward_rows(1, &mut buf, &|y, line| {
+                for (d, v) in line.iter_mut().zip(&x[y * w..(y + 1) * w]) {
+                    *d = *v as f32;
+                }
+            });
+            p.scramble_columns(1, &mut buf, 9);
+            let mut plane = vec![0f32; w * h];
+            let mut work = (Vec::new(), p.plan.c2r.make_scratch_vec());
+            for (band, out) in plane.chunks_mut(ROW_BAND * w).enumerate() {
+                p.inverse_rows(&buf, 0, band * ROW_BAND, out, &mut work);
+            }
             for y in 0..h {
                 for xx in 0..w {
                     let mut re = 0.0;
@@ -799,7 +923,7 @@ mod tests {
                         }
                     }
                     let want = re / (w * h) as f64;
-                    let got = plane[y * w + xx] as f64;
+                    let got = plane[y * w + xx] as f64 / (w * h) as f64;
                     assert!(
                         (want - got).abs() < 1e-2,
                         "{w}x{h} ({xx},{y}): {got} vs {want}"
