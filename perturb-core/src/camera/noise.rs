@@ -297,6 +297,9 @@ pub struct JpegCompression {
     /// Orthonormal DCT-II matrix: `m[u][x] = c(u)/2 cos((2x+1)u pi/16)` (its transpose is the
     /// inverse transform).
     m: Block,
+    /// Plane buffers of finished frames, reused by the next ones (fresh pages cost a fault and a
+    /// zeroing each, a third of the frame at 2.3 MP).
+    spare: std::sync::Mutex<Vec<Vec<f32>>>,
 }
 
 type Block = [[f32; 8]; 8];
@@ -390,6 +393,7 @@ pub const JPEG: CameraBuilder = |s| {
         luma_q: scaled_table(&LUMA_Q, q),
         chroma_q: scaled_table(&CHROMA_Q, q),
         m,
+        spare: std::sync::Mutex::new(Vec::new()),
     }))
 };
 
@@ -401,12 +405,12 @@ struct Plane {
 }
 
 impl Plane {
-    fn new(w: usize, h: usize) -> Self {
+    /// A `w x h` plane in `data` (resized; its old contents are left for the caller to
+    /// overwrite).
+    fn new(w: usize, h: usize, mut data: Vec<f32>) -> Self {
         let (pw, ph) = (w.div_ceil(8) * 8, h.div_ceil(8) * 8);
-        Plane {
-            w: pw,
-            data: vec![0.0; pw * ph.max(8)],
-        }
+        data.resize(pw * ph.max(8), 0.0);
+        Plane { w: pw, data }
     }
 
     /// Replicates the last real column and row into the padding.
@@ -425,6 +429,12 @@ impl Plane {
 }
 
 impl JpegCompression {
+    /// Keeps plane buffers for the next frame.
+    fn recycle(&self, bufs: impl IntoIterator<Item = Vec<f32>>) {
+        let mut pool = self.spare.lock().unwrap_or_else(|e| e.into_inner());
+        pool.extend(bufs.into_iter().filter(|b| b.capacity() > 0));
+    }
+
     /// DCT, quantise, dequantise, inverse DCT of every 8x8 block of `p` (level-shifted by 128),
     /// in place, in parallel over block rows.
     fn roundtrip_plane(&self, p: &mut Plane, q: &[f32; 64]) {
@@ -459,20 +469,68 @@ impl JpegCompression {
     }
 }
 
-/// JFIF RGB to YCbCr of one row: luma into `y`, chroma summed into the half-width `cb`, `cr`.
+/// JFIF RGB to YCbCr of one row of `c`-byte pixels: luma into `y`, chroma added into the
+/// half-width `cb`, `cr` (left pixel of each pair first). `work` (4 `y.len()` floats) holds the
+/// row deinterleaved, so that the arithmetic runs on contiguous arrays.
 #[inline]
-fn to_ycc<const C: usize>(
+fn to_ycc(
     src: &[u8],
+    c: usize,
     [ri, gi, bi]: [usize; 3],
+    work: &mut [f32],
     y: &mut [f32],
     cb: &mut [f32],
     cr: &mut [f32],
 ) {
-    for ((px, yv), x) in src.chunks_exact(C).zip(y.iter_mut()).zip(0usize..) {
-        let (r, g, b) = (px[ri] as f32, px[gi] as f32, px[bi] as f32);
+    let w = y.len();
+    let (r, rest) = work.split_at_mut(w);
+    let (g, rest) = rest.split_at_mut(w);
+    let (b, t) = rest.split_at_mut(w);
+    for (((px, r), g), b) in src
+        .chunks_exact(c)
+        .zip(r.iter_mut())
+        .zip(g.iter_mut())
+        .zip(b.iter_mut())
+    {
+        (*r, *g, *b) = (px[ri] as f32, px[gi] as f32, px[bi] as f32);
+    }
+    let rgb = || r.iter().zip(g.iter()).zip(b.iter());
+    for (yv, ((&r, &g), &b)) in y.iter_mut().zip(rgb()) {
         *yv = 0.299 * r + 0.587 * g + 0.114 * b;
-        cb[x >> 1] += -0.168_736 * r - 0.331_264 * g + 0.5 * b;
-        cr[x >> 1] += 0.5 * r - 0.418_688 * g - 0.081_312 * b;
+    }
+    let pair_sums = |t: &[f32], out: &mut [f32]| {
+        for (o, pair) in out.iter_mut().zip(t.chunks(2)) {
+            *o = match pair {
+                [a, b] => (*o + a) + b,
+                [a] => *o + a,
+                _ => *o,
+            };
+        }
+    };
+    for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
+        *tv = -0.168_736 * r - 0.331_264 * g + 0.5 * b;
+    }
+    pair_sums(t, cb);
+    for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
+        *tv = 0.5 * r - 0.418_688 * g - 0.081_312 * b;
+    }
+    pair_sums(t, cr);
+}
+
+/// libjpeg's "fancy" horizontal upsampling of one chroma row `t` (already weighted 3:1
+/// vertically) to `out`: sample `2i` weighs `t[i]` 3/4 and `t[i - 1]` 1/4, sample `2i + 1` weighs
+/// `t[i]` 3/4 and `t[i + 1]` 1/4 (edges replicated); the result is scaled by 1/16 and the 128
+/// offset removed.
+#[inline]
+fn upsample_row(t: &[f32], out: &mut [f32]) {
+    let n = t.len();
+    let f = |c: f32, side: f32| (3.0 * c + side) * (1.0 / 16.0) - 128.0;
+    for (i, pair) in out.chunks_mut(2).enumerate() {
+        let c = t[i];
+        pair[0] = f(c, t[i.saturating_sub(1)]);
+        if let Some(odd) = pair.get_mut(1) {
+            *odd = f(c, t[(i + 1).min(n - 1)]);
+        }
     }
 }
 
@@ -482,8 +540,21 @@ impl CameraPerturbation for JpegCompression {
         let (w, h) = (input.width as usize, input.height as usize);
         let f = input.format;
         let c = f.channels();
+        let mut spare = {
+            let mut pool = self.spare.lock().unwrap_or_else(|e| e.into_inner());
+            std::mem::take(&mut *pool)
+        };
+        // The smallest kept buffer that holds `need` floats, else the largest (which grows).
+        let mut take = |need: usize| {
+            let fits = (0..spare.len())
+                .filter(|&i| spare[i].capacity() >= need)
+                .min_by_key(|&i| spare[i].capacity());
+            let best = fits.or_else(|| (0..spare.len()).max_by_key(|&i| spare[i].capacity()));
+            best.map(|i| spare.swap_remove(i)).unwrap_or_default()
+        };
+        let size = |w: usize, h: usize| w.div_ceil(8) * 8 * (h.div_ceil(8) * 8).max(8);
         if f.is_mono() {
-            let mut y = Plane::new(w, h);
+            let mut y = Plane::new(w, h, take(size(w, h)));
             let pw = y.w;
             y.data
                 .par_chunks_mut(pw)
@@ -501,13 +572,14 @@ impl CameraPerturbation for JpegCompression {
                     *d = (y.data[r * pw + x] + 0.5) as u8;
                 }
             });
+            self.recycle(spare.into_iter().chain([y.data]));
             return;
         }
         let [ri, gi, bi] = f.rgb_offsets();
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-        let mut yp = Plane::new(w, h);
-        let mut cb = Plane::new(cw, ch);
-        let mut cr = Plane::new(cw, ch);
+        let mut yp = Plane::new(w, h, take(size(w, h)));
+        let mut cb = Plane::new(cw, ch, take(size(cw, ch)));
+        let mut cr = Plane::new(cw, ch, take(size(cw, ch)));
         let (ypw, cpw) = (yp.w, cb.w);
         // Colour conversion and 2x2 chroma averaging, one pair of image rows per chroma row.
         yp.data
@@ -515,22 +587,24 @@ impl CameraPerturbation for JpegCompression {
             .zip(cb.data.par_chunks_mut(cpw).zip(cr.data.par_chunks_mut(cpw)))
             .take(ch)
             .enumerate()
-            .for_each(|(cy, (ypair, (cbrow, crrow)))| {
-                let r0 = 2 * cy;
-                let nrows = (h - r0).min(2);
-                for k in 0..nrows {
-                    let yrow = &mut ypair[k * ypw..k * ypw + w];
-                    match c {
-                        3 => to_ycc::<3>(input.row(r0 + k), [ri, gi, bi], yrow, cbrow, crrow),
-                        _ => to_ycc::<4>(input.row(r0 + k), [ri, gi, bi], yrow, cbrow, crrow),
+            .for_each_init(
+                || vec![0f32; 4 * w],
+                |work, (cy, (ypair, (cbrow, crrow)))| {
+                    let r0 = 2 * cy;
+                    let nrows = (h - r0).min(2);
+                    cbrow.fill(0.0);
+                    crrow.fill(0.0);
+                    for k in 0..nrows {
+                        let yrow = &mut ypair[k * ypw..k * ypw + w];
+                        to_ycc(input.row(r0 + k), c, [ri, gi, bi], work, yrow, cbrow, crrow);
                     }
-                }
-                for cx in 0..cw {
-                    let n = (nrows * ((2 * cx + 2).min(w) - 2 * cx)) as f32;
-                    cbrow[cx] = cbrow[cx] / n + 128.0;
-                    crrow[cx] = crrow[cx] / n + 128.0;
-                }
-            });
+                    for cx in 0..cw {
+                        let n = (nrows * ((2 * cx + 2).min(w) - 2 * cx)) as f32;
+                        cbrow[cx] = cbrow[cx] / n + 128.0;
+                        crrow[cx] = crrow[cx] / n + 128.0;
+                    }
+                },
+            );
         yp.pad(w, h);
         cb.pad(cw, ch);
         cr.pad(cw, ch);
@@ -538,58 +612,60 @@ impl CameraPerturbation for JpegCompression {
         self.roundtrip_plane(&mut cb, &self.chroma_q);
         self.roundtrip_plane(&mut cr, &self.chroma_q);
         // Fancy upsampling: each output sample weighs its nearest chroma sample 3/4 and the next one
-        // 1/4 in each direction (9/16, 3/16, 3/16, 1/16); the neighbour columns are precomputed.
-        let ncol: Vec<(usize, usize)> = (0..w)
-            .map(|x| {
-                let cx = x / 2;
-                let nx = if x % 2 == 0 {
-                    cx.saturating_sub(1)
-                } else {
-                    (cx + 1).min(cw - 1)
-                };
-                (cx, nx)
-            })
-            .collect();
-        par_rows(input, output, |r, src, dst| {
-            let cy = r / 2;
-            let ny = if r % 2 == 0 {
-                cy.saturating_sub(1)
-            } else {
-                (cy + 1).min(ch - 1)
-            };
-            // Vertical weights first (3/4, 1/4), then horizontal, then the colour conversion on
-            // contiguous rows (vectorisable); the bytes are interleaved last.
-            let vertical = |p: &Plane| -> Vec<f32> {
-                let (a, b) = (
-                    &p.data[cy * cpw..cy * cpw + cw],
-                    &p.data[ny * cpw..ny * cpw + cw],
-                );
-                a.iter().zip(b).map(|(a, b)| 3.0 * a + b).collect()
-            };
-            let (tb, tr) = (vertical(&cb), vertical(&cr));
-            let (mut u, mut v) = (vec![0f32; w], vec![0f32; w]);
-            for (x, &(cx, nx)) in ncol.iter().enumerate() {
-                u[x] = (3.0 * tb[cx] + tb[nx]) * (1.0 / 16.0) - 128.0;
-                v[x] = (3.0 * tr[cx] + tr[nx]) * (1.0 / 16.0) - 128.0;
+        // 1/4 in each direction (9/16, 3/16, 3/16, 1/16): vertical weights first, then
+        // horizontal, then the colour conversion on contiguous rows (vectorisable); the bytes are
+        // interleaved last.
+        // max/min rather than clamp: no NaN case to carry, and the loop vectorises.
+        #[allow(clippy::manual_clamp)]
+        let to_u8 = |f: f32| f.max(0.0).min(255.0) as u8;
+        let vertical = |p: &Plane, cy: usize, ny: usize, t: &mut [f32]| {
+            let (a, b) = (&p.data[cy * cpw..][..cw], &p.data[ny * cpw..][..cw]);
+            for ((d, a), b) in t.iter_mut().zip(a).zip(b) {
+                *d = 3.0 * a + b;
             }
-            let yrow = &yp.data[r * ypw..r * ypw + w];
-            // max/min rather than clamp: no NaN case to carry, and the loop vectorises.
-            #[allow(clippy::manual_clamp)]
-            let to_u8 = |f: f32| f.max(0.0).min(255.0) as u8;
-            let mut planes = [vec![0u8; w], vec![0u8; w], vec![0u8; w]];
-            for (x, (&y, (&u, &v))) in yrow.iter().zip(u.iter().zip(&v)).enumerate() {
-                let yy = y + 0.5;
-                planes[0][x] = to_u8(yy + 1.402 * v);
-                planes[1][x] = to_u8(yy - 0.344_136 * u - 0.714_136 * v);
-                planes[2][x] = to_u8(yy + 1.772 * u);
-            }
-            for (x, o) in dst.chunks_exact_mut(c).enumerate() {
-                o[ri] = planes[0][x];
-                o[gi] = planes[1][x];
-                o[bi] = planes[2][x];
-            }
-            copy_alpha(f, src, dst);
-        });
+        };
+        let rows = output.rows_mut();
+        rows.into_par_iter()
+            .with_min_len(8)
+            .enumerate()
+            .for_each_init(
+                || (vec![0f32; cw], vec![0f32; 2 * w], vec![0u8; 3 * w]),
+                |(t, uv, planes), (r, dst)| {
+                    let cy = r / 2;
+                    let ny = if r % 2 == 0 {
+                        cy.saturating_sub(1)
+                    } else {
+                        (cy + 1).min(ch - 1)
+                    };
+                    let (u, v) = uv.split_at_mut(w);
+                    vertical(&cb, cy, ny, t);
+                    upsample_row(t, u);
+                    vertical(&cr, cy, ny, t);
+                    upsample_row(t, v);
+                    let yrow = &yp.data[r * ypw..][..w];
+                    let (p0, rest) = planes.split_at_mut(w);
+                    let (p1, p2) = rest.split_at_mut(w);
+                    let yuv = yrow.iter().zip(u.iter()).zip(v.iter());
+                    for (((((&y, &u), &v), pr), pg), pb) in
+                        yuv.zip(p0.iter_mut()).zip(p1.iter_mut()).zip(p2.iter_mut())
+                    {
+                        let yy = y + 0.5;
+                        *pr = to_u8(yy + 1.402 * v);
+                        *pg = to_u8(yy - 0.344_136 * u - 0.714_136 * v);
+                        *pb = to_u8(yy + 1.772 * u);
+                    }
+                    for (((o, &rv), &gv), &bv) in dst
+                        .chunks_exact_mut(c)
+                        .zip(p0.iter())
+                        .zip(p1.iter())
+                        .zip(p2.iter())
+                    {
+                        (o[ri], o[gi], o[bi]) = (rv, gv, bv);
+                    }
+                    copy_alpha(f, input.row(r), dst);
+                },
+            );
+        self.recycle(spare.into_iter().chain([yp.data, cb.data, cr.data]));
     }
 }
 
