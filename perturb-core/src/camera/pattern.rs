@@ -190,96 +190,103 @@ pub fn canny(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> Vec<bool> 
     if w == 0 || h == 0 {
         return Vec::new();
     }
+    let (edge, pw) = canny_padded(gray, w, h, low, high);
+    edge.chunks_exact(pw)
+        .skip(1)
+        .take(h)
+        .flat_map(|row| &row[1..=w])
+        .copied()
+        .collect()
+}
+
+/// [`canny`] on planes padded by one pixel on every side (magnitude 0, never an edge), so that no
+/// neighbour access needs a bounds test: returns the `(w + 2) x (h + 2)` edge map and its width.
+/// `w` and `h` must not be 0.
+fn canny_padded(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> (Vec<bool>, usize) {
+    let pw = w + 2;
     // Sobel, row by row: with S = up + 2 mid + down and D = down - up per column (rows clamped),
     // gx = S[x + 1] - S[x - 1] and gy = D[x - 1] + 2 D[x] + D[x + 1] (columns clamped). Each pixel
     // keeps its L1 magnitude (at most 2040, 11 bits) and the direction its non-maximum test looks
     // along (bits 12-13): 0 horizontal, 1 vertical, 2 and 3 the diagonals.
     let (tg22, tg67) = (0.414_213_56f64, 2.414_213_56f64);
-    let mut grad = vec![0u16; w * h];
-    grad.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-        let row = |y: usize| &gray[y * w..(y + 1) * w];
-        let (up, mid, down) = (row(y.saturating_sub(1)), row(y), row((y + 1).min(h - 1)));
-        let mut s = vec![0i16; w + 2];
-        let mut d = vec![0i16; w + 2];
-        for (x, ((&u, &m), &n)) in up.iter().zip(mid).zip(down).enumerate() {
-            s[x + 1] = u as i16 + 2 * m as i16 + n as i16;
-            d[x + 1] = n as i16 - u as i16;
-        }
-        (s[0], s[w + 1], d[0], d[w + 1]) = (s[1], s[w], d[1], d[w]);
-        for (x, g) in out.iter_mut().enumerate() {
-            let gx = s[x + 2] - s[x];
-            let gy = d[x] + 2 * d[x + 1] + d[x + 2];
-            // Branch-free: the direction is stored for every pixel and read only above `low`.
-            let (ax, ay) = (gx.abs() as f64, gy.abs() as f64);
-            let near_horizontal = (ay <= ax * tg22) as u16;
-            let near_vertical = (ay >= ax * tg67) as u16;
-            let diagonal = 3 - ((gx > 0) == (gy > 0)) as u16;
-            let dir = (diagonal - near_vertical * (diagonal - 1)) * (1 - near_horizontal);
-            *g = (gx.abs() + gy.abs()) as u16 | dir << 12;
-        }
-    });
-    // Non-maximum suppression, row by row: 0 not an edge, 1 weak candidate, 2 strong. Outside
-    // the image the magnitude is 0.
-    let mut state = vec![0u8; w * h];
-    let seeds: Vec<Vec<usize>> = state
-        .par_chunks_mut(w)
+    let mut grad = vec![0u16; pw * (h + 2)];
+    grad.par_chunks_mut(pw)
         .enumerate()
-        .map(|(y, out)| {
+        .skip(1)
+        .take(h)
+        .for_each(|(py, out)| {
+            let y = py - 1;
+            let row = |y: usize| &gray[y * w..(y + 1) * w];
+            let (up, mid, down) = (row(y.saturating_sub(1)), row(y), row((y + 1).min(h - 1)));
+            let mut s = vec![0i16; w + 2];
+            let mut d = vec![0i16; w + 2];
+            for (x, ((&u, &m), &n)) in up.iter().zip(mid).zip(down).enumerate() {
+                s[x + 1] = u as i16 + 2 * m as i16 + n as i16;
+                d[x + 1] = n as i16 - u as i16;
+            }
+            (s[0], s[w + 1], d[0], d[w + 1]) = (s[1], s[w], d[1], d[w]);
+            for (x, g) in out[1..=w].iter_mut().enumerate() {
+                let gx = s[x + 2] - s[x];
+                let gy = d[x] + 2 * d[x + 1] + d[x + 2];
+                // Branch-free: the direction is stored for every pixel and read only above `low`.
+                let (ax, ay) = (gx.abs() as f64, gy.abs() as f64);
+                let near_horizontal = (ay <= ax * tg22) as u16;
+                let near_vertical = (ay >= ax * tg67) as u16;
+                let diagonal = 3 - ((gx > 0) == (gy > 0)) as u16;
+                let dir = (diagonal - near_vertical * (diagonal - 1)) * (1 - near_horizontal);
+                *g = (gx.abs() + gy.abs()) as u16 | dir << 12;
+            }
+        });
+    // Non-maximum suppression, row by row: 0 not an edge, 1 weak candidate, 2 strong. A pixel is a maximum when its magnitude exceeds the neighbour before it along its
+    // direction and is not below the one after it; `step` is the distance to the neighbour after
+    // it for each direction (horizontal, vertical, the two diagonals).
+    let step = [1, pw, pw + 1, pw - 1];
+    let mut state = vec![0u8; pw * (h + 2)];
+    let seeds: Vec<Vec<usize>> = state
+        .par_chunks_mut(pw)
+        .enumerate()
+        .skip(1)
+        .take(h)
+        .map(|(py, out)| {
             let mut strong = Vec::new();
-            let m = |x: i64, dy: i64| {
-                let yy = y as i64 + dy;
-                if x < 0 || yy < 0 || x >= w as i64 || yy >= h as i64 {
-                    0
-                } else {
-                    (grad[yy as usize * w + x as usize] & 0xFFF) as i32
-                }
-            };
-            for (x, o) in out.iter_mut().enumerate() {
-                let g = grad[y * w + x];
+            for (x, o) in out.iter_mut().enumerate().take(w + 1).skip(1) {
+                let k = py * pw + x;
+                let g = grad[k];
                 let v = (g & 0xFFF) as i32;
+                // Most pixels are at or below `low`: a branch the predictor gets right.
                 if v <= low {
                     continue;
                 }
-                let x = x as i64;
-                let is_max = match g >> 12 {
-                    0 => v > m(x - 1, 0) && v >= m(x + 1, 0),
-                    1 => v > m(x, -1) && v >= m(x, 1),
-                    2 => v > m(x - 1, -1) && v >= m(x + 1, 1),
-                    _ => v > m(x + 1, -1) && v >= m(x - 1, 1),
-                };
-                if is_max {
-                    *o = if v > high { 2 } else { 1 };
-                    if v > high {
-                        strong.push(y * w + x as usize);
-                    }
+                let d = step[(g >> 12) as usize & 3];
+                let (before, after) = ((grad[k - d] & 0xFFF) as i32, (grad[k + d] & 0xFFF) as i32);
+                let is_max = (v > before) & (v >= after);
+                let s = is_max as u8 * (1 + (v > high) as u8);
+                *o = s;
+                if s == 2 {
+                    strong.push(k);
                 }
             }
             strong
         })
         .collect();
     // Hysteresis: the weak candidates 8-connected to a strong pixel (the closure does not depend
-    // on the order the seeds are taken in).
+    // on the order the seeds are taken in). The padding is never a candidate, so the walk needs no
+    // bounds tests.
+    let around = [pw + 1, pw, pw - 1, 1];
     let mut stack: Vec<usize> = seeds.concat();
-    let mut edge = vec![false; w * h];
+    let mut edge = vec![false; pw * (h + 2)];
     while let Some(k) = stack.pop() {
         if edge[k] {
             continue;
         }
         edge[k] = true;
-        let (x, y) = ((k % w) as i64, (k / w) as i64);
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let (nx, ny) = (x + dx, y + dy);
-                if nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64 {
-                    let n = ny as usize * w + nx as usize;
-                    if state[n] > 0 && !edge[n] {
-                        stack.push(n);
-                    }
-                }
+        for n in around.iter().flat_map(|&o| [k - o, k + o]) {
+            if state[n] > 0 && !edge[n] {
+                stack.push(n);
             }
         }
     }
-    edge
+    (edge, pw)
 }
 
 /// C-E4 canny_edges: the frame dimmed to 70 % with red (255, 0, 0) Canny edges added at 30 %:
@@ -311,7 +318,11 @@ impl CameraPerturbation for CannyEdges {
                     *g = crate::image::luma(p[ri], p[gi], p[bi]);
                 }
             });
-        let edges = canny(&gray, w, h, self.low, self.high);
+        let (edges, pw) = if w == 0 || h == 0 {
+            (Vec::new(), 0)
+        } else {
+            canny_padded(&gray, w, h, self.low, self.high)
+        };
         let dim: [u8; 256] = std::array::from_fn(|v| (0.7 * v as f64).round_ties_even() as u8);
         let red: [u8; 256] = std::array::from_fn(|v| {
             (0.7 * v as f64 + 0.3 * 255.0).round_ties_even().min(255.0) as u8
@@ -330,7 +341,7 @@ impl CameraPerturbation for CannyEdges {
             for (q, p) in dst.iter_mut().zip(src) {
                 *q = dim[*p as usize];
             }
-            let row_edges = &edges[y * w..(y + 1) * w];
+            let row_edges = &edges[(y + 1) * pw + 1..(y + 1) * pw + 1 + w];
             for (x, _) in row_edges.iter().enumerate().filter(|(_, e)| **e) {
                 dst[x * c + edge_ch] = edge_lut[src[x * c + edge_ch] as usize];
             }
