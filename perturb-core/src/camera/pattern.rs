@@ -237,36 +237,36 @@ fn canny_padded(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> (Vec<bo
                 *g = (gx.abs() + gy.abs()) as u16 | dir << 12;
             }
         });
-    // Non-maximum suppression, row by row: 0 not an edge, 1 weak candidate, 2 strong. A pixel is a maximum when its magnitude exceeds the neighbour before it along its
-    // direction and is not below the one after it; `step` is the distance to the neighbour after
-    // it for each direction (horizontal, vertical, the two diagonals).
-    let step = [1, pw, pw + 1, pw - 1];
+    // Non-maximum suppression, row by row: 0 not an edge, 1 weak candidate, 2 strong. A pixel is
+    // a maximum when its magnitude exceeds the neighbour before it along its direction and is not
+    // below the one after it. All four directions' tests run on every pixel from shifted rows and
+    // the pixel's own direction picks one: no branches and no gathers, so the loop vectorises.
     let mut state = vec![0u8; pw * (h + 2)];
+    let (low, high) = (low.clamp(-1, 0xFFF) as i16, high.clamp(-1, 0xFFF) as i16);
     let seeds: Vec<Vec<usize>> = state
         .par_chunks_mut(pw)
         .enumerate()
         .skip(1)
         .take(h)
         .map(|(py, out)| {
-            let mut strong = Vec::new();
-            for (x, o) in out.iter_mut().enumerate().take(w + 1).skip(1) {
-                let k = py * pw + x;
-                let g = grad[k];
-                let v = (g & 0xFFF) as i32;
-                // Most pixels are at or below `low`: a branch the predictor gets right.
-                if v <= low {
-                    continue;
-                }
-                let d = step[(g >> 12) as usize & 3];
-                let (before, after) = ((grad[k - d] & 0xFFF) as i32, (grad[k + d] & 0xFFF) as i32);
-                let is_max = (v > before) & (v >= after);
-                let s = is_max as u8 * (1 + (v > high) as u8);
-                *o = s;
-                if s == 2 {
-                    strong.push(k);
-                }
+            let row = |py: usize| &grad[py * pw..(py + 1) * pw];
+            let (up, cur, down) = (row(py - 1), row(py), row(py + 1));
+            let m = |g: u16| (g & 0xFFF) as i16;
+            for (x, o) in out[1..=w].iter_mut().enumerate() {
+                let g = cur[x + 1];
+                let (v, dir) = (m(g), g >> 12);
+                let horizontal = (v > m(cur[x])) & (v >= m(cur[x + 2]));
+                let vertical = (v > m(up[x + 1])) & (v >= m(down[x + 1]));
+                let falling = (v > m(up[x])) & (v >= m(down[x + 2]));
+                let rising = (v > m(up[x + 2])) & (v >= m(down[x]));
+                let is_max = (horizontal & (dir == 0))
+                    | (vertical & (dir == 1))
+                    | (falling & (dir == 2))
+                    | (rising & (dir == 3));
+                *o = (is_max & (v > low)) as u8 * (1 + (v > high) as u8);
             }
-            strong
+            let strong = out.iter().enumerate().filter(|(_, s)| **s == 2);
+            strong.map(|(x, _)| py * pw + x).collect()
         })
         .collect();
     // Hysteresis: the weak candidates 8-connected to a strong pixel (the closure does not depend
