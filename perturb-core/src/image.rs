@@ -463,6 +463,27 @@ pub fn luma(r: u8, g: u8, b: u8) -> u8 {
     ((r as u32 * 19595 + g as u32 * 38470 + b as u32 * 7471 + 32768) >> 16) as u8
 }
 
+/// [`luma`] of every pixel of a row of `format` into `dst`, one byte per pixel (mono8 is copied).
+/// Each colour format gets its own loop with the channel positions known at compile time, which
+/// lets the compiler vectorise it.
+pub fn luma_row(src: &[u8], format: PixelFormat, dst: &mut [u8]) {
+    fn each<const C: usize, const R: usize, const B: usize>(src: &[u8], dst: &mut [u8]) {
+        for (d, p) in dst.iter_mut().zip(src.chunks_exact(C)) {
+            *d = luma(p[R], p[1], p[B]);
+        }
+    }
+    match format {
+        PixelFormat::Rgb8 => each::<3, 0, 2>(src, dst),
+        PixelFormat::Bgr8 => each::<3, 2, 0>(src, dst),
+        PixelFormat::Rgba8 => each::<4, 0, 2>(src, dst),
+        PixelFormat::Bgra8 => each::<4, 2, 0>(src, dst),
+        PixelFormat::Mono8 => {
+            let n = dst.len().min(src.len());
+            dst[..n].copy_from_slice(&src[..n]);
+        }
+    }
+}
+
 /// Bilinear resize (pixel centres aligned, as OpenCV's INTER_LINEAR), any format; alpha is
 /// resampled like the colour channels. Used to bring real frames to benchmark sizes.
 pub fn resize_bilinear(src: &ImageView<'_>, width: u32, height: u32) -> Image {
@@ -531,6 +552,30 @@ mod tests {
         assert_eq!(bgra.data, vec![30, 20, 10, 255, 0, 100, 200, 255]);
         assert_eq!(bgra.convert(PixelFormat::Rgb8), img);
         assert_eq!(luma(255, 255, 255), 255);
+    }
+
+    #[test]
+    fn luma_row_matches_luma_in_every_format() {
+        let rgb = Image::from_vec(
+            (0..7 * 3).map(|i| (i * 37 % 256) as u8).collect(),
+            7,
+            1,
+            21,
+            PixelFormat::Rgb8,
+        )
+        .unwrap();
+        let want: Vec<u8> = rgb
+            .data
+            .chunks_exact(3)
+            .map(|p| luma(p[0], p[1], p[2]))
+            .collect();
+        for format in PixelFormat::ALL {
+            let img = rgb.convert(format);
+            let mut got = vec![0u8; 7];
+            luma_row(&img.data, format, &mut got);
+            let expected = if format.is_mono() { &img.data } else { &want };
+            assert_eq!(&got, expected, "{format:?}");
+        }
     }
 
     #[test]

@@ -309,14 +309,12 @@ impl CameraPerturbation for CannyEdges {
         let (w, h) = (input.width as usize, input.height as usize);
         let f = input.format;
         let c = f.channels();
-        let [ri, gi, bi] = f.rgb_offsets();
+        let ri = f.rgb_offsets()[0];
         let mut gray = vec![0u8; w * h];
         gray.par_chunks_mut(w.max(1))
             .enumerate()
             .for_each(|(y, row)| {
-                for (g, p) in row.iter_mut().zip(input.row(y).chunks_exact(c)) {
-                    *g = crate::image::luma(p[ri], p[gi], p[bi]);
-                }
+                crate::image::luma_row(input.row(y), f, row);
             });
         let (edges, pw) = if w == 0 || h == 0 {
             (Vec::new(), 0)
