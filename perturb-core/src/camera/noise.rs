@@ -7,7 +7,7 @@
 
 #[cfg(test)]
 use super::CameraSetup;
-use super::ops::{copy_alpha, par_rows, row_rng};
+use super::ops::{copy_alpha, merge_rgb, par_rows, row_rng, split_rgb};
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
 use crate::rng::{Rng, normal_quantile};
@@ -475,8 +475,7 @@ impl JpegCompression {
 #[inline]
 fn to_ycc(
     src: &[u8],
-    c: usize,
-    [ri, gi, bi]: [usize; 3],
+    format: PixelFormat,
     work: &mut [f32],
     y: &mut [f32],
     cb: &mut [f32],
@@ -486,14 +485,7 @@ fn to_ycc(
     let (r, rest) = work.split_at_mut(w);
     let (g, rest) = rest.split_at_mut(w);
     let (b, t) = rest.split_at_mut(w);
-    for (((px, r), g), b) in src
-        .chunks_exact(c)
-        .zip(r.iter_mut())
-        .zip(g.iter_mut())
-        .zip(b.iter_mut())
-    {
-        (*r, *g, *b) = (px[ri] as f32, px[gi] as f32, px[bi] as f32);
-    }
+    split_rgb(src, format, [&mut *r, &mut *g, &mut *b]);
     let rgb = || r.iter().zip(g.iter()).zip(b.iter());
     for (yv, ((&r, &g), &b)) in y.iter_mut().zip(rgb()) {
         *yv = 0.299 * r + 0.587 * g + 0.114 * b;
@@ -539,7 +531,6 @@ impl CameraPerturbation for JpegCompression {
         use rayon::prelude::*;
         let (w, h) = (input.width as usize, input.height as usize);
         let f = input.format;
-        let c = f.channels();
         let mut spare = {
             let mut pool = self.spare.lock().unwrap_or_else(|e| e.into_inner());
             std::mem::take(&mut *pool)
@@ -575,7 +566,6 @@ impl CameraPerturbation for JpegCompression {
             self.recycle(spare.into_iter().chain([y.data]));
             return;
         }
-        let [ri, gi, bi] = f.rgb_offsets();
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
         let mut yp = Plane::new(w, h, take(size(w, h)));
         let mut cb = Plane::new(cw, ch, take(size(cw, ch)));
@@ -596,7 +586,7 @@ impl CameraPerturbation for JpegCompression {
                     crrow.fill(0.0);
                     for k in 0..nrows {
                         let yrow = &mut ypair[k * ypw..k * ypw + w];
-                        to_ycc(input.row(r0 + k), c, [ri, gi, bi], work, yrow, cbrow, crrow);
+                        to_ycc(input.row(r0 + k), f, work, yrow, cbrow, crrow);
                     }
                     for cx in 0..cw {
                         let n = (nrows * ((2 * cx + 2).min(w) - 2 * cx)) as f32;
@@ -654,14 +644,7 @@ impl CameraPerturbation for JpegCompression {
                         *pg = to_u8(yy - 0.344_136 * u - 0.714_136 * v);
                         *pb = to_u8(yy + 1.772 * u);
                     }
-                    for (((o, &rv), &gv), &bv) in dst
-                        .chunks_exact_mut(c)
-                        .zip(p0.iter())
-                        .zip(p1.iter())
-                        .zip(p2.iter())
-                    {
-                        (o[ri], o[gi], o[bi]) = (rv, gv, bv);
-                    }
+                    merge_rgb(f, [&*p0, &*p1, &*p2], dst);
                     copy_alpha(f, input.row(r), dst);
                 },
             );

@@ -38,6 +38,53 @@ pub fn copy_alpha(format: PixelFormat, src: &[u8], dst: &mut [u8]) {
     }
 }
 
+/// Splits a row of colour pixels of `format` into three planes of floats, red, green and blue
+/// (mono8: the grey value in all three). Each format gets its own loop with the channel positions
+/// known at compile time, which lets the compiler vectorise it.
+pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
+    fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
+        src: &[u8],
+        [r, g, b]: [&mut [f32]; 3],
+    ) {
+        let planes = r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut());
+        for (((r, g), b), p) in planes.zip(src.chunks_exact(C)) {
+            (*r, *g, *b) = (p[R] as f32, p[G] as f32, p[B] as f32);
+        }
+    }
+    match format {
+        PixelFormat::Rgb8 => each::<3, 0, 1, 2>(src, [r, g, b]),
+        PixelFormat::Bgr8 => each::<3, 2, 1, 0>(src, [r, g, b]),
+        PixelFormat::Rgba8 => each::<4, 0, 1, 2>(src, [r, g, b]),
+        PixelFormat::Bgra8 => each::<4, 2, 1, 0>(src, [r, g, b]),
+        PixelFormat::Mono8 => each::<1, 0, 0, 0>(src, [r, g, b]),
+    }
+}
+
+/// Writes three planes of bytes, red, green and blue, into the colour channels of a row of
+/// `format` pixels; alpha is left as it is. Mono8 takes the red plane. The counterpart of
+/// [`split_rgb`].
+pub fn merge_rgb(format: PixelFormat, [r, g, b]: [&[u8]; 3], dst: &mut [u8]) {
+    fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
+        [r, g, b]: [&[u8]; 3],
+        dst: &mut [u8],
+    ) {
+        let planes = r.iter().zip(g).zip(b);
+        for (((&r, &g), &b), p) in planes.zip(dst.chunks_exact_mut(C)) {
+            (p[R], p[G], p[B]) = (r, g, b);
+        }
+    }
+    match format {
+        PixelFormat::Rgb8 => each::<3, 0, 1, 2>([r, g, b], dst),
+        PixelFormat::Bgr8 => each::<3, 2, 1, 0>([r, g, b], dst),
+        PixelFormat::Rgba8 => each::<4, 0, 1, 2>([r, g, b], dst),
+        PixelFormat::Bgra8 => each::<4, 2, 1, 0>([r, g, b], dst),
+        PixelFormat::Mono8 => {
+            let n = dst.len().min(r.len());
+            dst[..n].copy_from_slice(&r[..n]);
+        }
+    }
+}
+
 /// Applies a 256-entry lookup table to every colour byte; alpha is copied.
 pub fn apply_lut(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, lut: &[u8; 256]) {
     let format = input.format;
