@@ -926,6 +926,42 @@ mod tests {
     use crate::image::Image;
 
     #[test]
+    fn split_and_merge_rgb_follow_each_formats_channel_positions() {
+        let rgb = Image::from_vec(
+            (0..5 * 3).map(|i| (i * 53 % 256) as u8).collect(),
+            5,
+            1,
+            15,
+            PixelFormat::Rgb8,
+        )
+        .unwrap();
+        for format in PixelFormat::ALL {
+            let img = rgb.convert(format);
+            let mut planes = [[0f32; 5]; 3];
+            let [r, g, b] = &mut planes;
+            split_rgb(&img.data, format, [r, g, b]);
+            for (x, p) in img.data.chunks_exact(format.channels()).enumerate() {
+                let [ri, gi, bi] = format.rgb_offsets();
+                let want = [p[ri], p[gi], p[bi]].map(|v| v as f32);
+                assert_eq!(
+                    [planes[0][x], planes[1][x], planes[2][x]],
+                    want,
+                    "{format:?}"
+                );
+            }
+            // Merging the planes back gives the same row, alpha untouched.
+            let bytes = planes.map(|p| p.map(|v| v as u8));
+            let mut out = img.data.clone();
+            out.iter_mut()
+                .enumerate()
+                .filter(|(i, _)| Some(i % format.channels()) != format.alpha_offset())
+                .for_each(|(_, v)| *v = 0);
+            merge_rgb(format, [&bytes[0], &bytes[1], &bytes[2]], &mut out);
+            assert_eq!(out, img.data, "{format:?}");
+        }
+    }
+
+    #[test]
     fn reflect101_matches_opencv() {
         let idx: Vec<usize> = (-3..8).map(|i| reflect101(i, 5)).collect();
         assert_eq!(idx, vec![3, 2, 1, 0, 1, 2, 3, 4, 3, 2, 1]);
