@@ -55,6 +55,30 @@ pub const DEFOCUS: CameraBuilder = |s| {
     Ok(Box::new(DefocusBlur { half_widths, count }))
 };
 
+/// Running sums modulo 2^16 of one row of `C`-byte pixels padded by `pad` reflected pixels at
+/// each end: `pre[(x + 1) C + ch]` is the sum of the first `x + 1` padded samples of channel
+/// `ch` (`pre[..C]` stays 0). The sums stay in registers from pixel to pixel.
+fn prefix_row<const C: usize>(src: &[u8], pad: usize, pre: &mut [u16]) {
+    let w = src.len() / C;
+    let mut run = [0u16; C];
+    let mut add = |sx: usize, out: &mut [u16]| {
+        for ch in 0..C {
+            run[ch] = run[ch].wrapping_add(src[sx * C + ch] as u16);
+            out[ch] = run[ch];
+        }
+    };
+    let mut outs = pre[C..].chunks_exact_mut(C);
+    for (px, out) in outs.by_ref().take(pad).enumerate() {
+        add(reflect101(px as i64 - pad as i64, w), out);
+    }
+    for (sx, out) in outs.by_ref().take(w).enumerate() {
+        add(sx, out);
+    }
+    for (px, out) in outs.enumerate() {
+        add(reflect101((w + px) as i64, w), out);
+    }
+}
+
 impl CameraPerturbation for DefocusBlur {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
         let (w, h, c) = (
@@ -72,15 +96,10 @@ impl CameraPerturbation for DefocusBlur {
         prefix
             .par_chunks_mut((pw + 1) * c)
             .enumerate()
-            .for_each(|(y, pre)| {
-                let src = input.row(y);
-                for px in 0..pw {
-                    let sx = reflect101(px as i64 - pad as i64, w);
-                    for ch in 0..c {
-                        pre[(px + 1) * c + ch] =
-                            pre[px * c + ch].wrapping_add(src[sx * c + ch] as u16);
-                    }
-                }
+            .for_each(|(y, pre)| match c {
+                1 => prefix_row::<1>(input.row(y), pad, pre),
+                3 => prefix_row::<3>(input.row(y), pad, pre),
+                _ => prefix_row::<4>(input.row(y), pad, pre),
             });
         // Disk rows summed in u16 before widening: as many as fit 2^16 at the widest segment.
         let per_group = (u16::MAX as usize / ((2 * r + 1) * 255)).max(1);
