@@ -38,6 +38,35 @@ pub fn copy_alpha(format: PixelFormat, src: &[u8], dst: &mut [u8]) {
     }
 }
 
+/// Row `src` (`c` samples per pixel) padded by `r` pixels at each end with reflect-101 borders,
+/// converted sample by sample with `f`, into `dst` (`(w + 2 r) c` long): the middle in one
+/// pass, only the `2 r` end pixels through [`reflect101`].
+pub fn pad_row<S: Copy, T>(src: &[S], c: usize, r: usize, dst: &mut [T], f: impl Fn(S) -> T) {
+    let w = src.len() / c;
+    for (d, s) in dst[r * c..(r + w) * c].iter_mut().zip(src) {
+        *d = f(*s);
+    }
+    for px in (0..r).chain(r + w..w + 2 * r) {
+        let sx = reflect101(px as i64 - r as i64, w);
+        for (d, s) in dst[px * c..px * c + c]
+            .iter_mut()
+            .zip(&src[sx * c..sx * c + c])
+        {
+            *d = f(*s);
+        }
+    }
+}
+
+/// [`pad_row`] without a conversion: the middle is one `copy_from_slice`.
+pub fn pad_row_copy<T: Copy>(src: &[T], c: usize, r: usize, dst: &mut [T]) {
+    let w = src.len() / c;
+    dst[r * c..(r + w) * c].copy_from_slice(src);
+    for px in (0..r).chain(r + w..w + 2 * r) {
+        let sx = reflect101(px as i64 - r as i64, w);
+        dst[px * c..px * c + c].copy_from_slice(&src[sx * c..sx * c + c]);
+    }
+}
+
 /// Splits a row of colour pixels of `format` into three planes of floats, red, green and blue
 /// (mono8: the grey value in all three). Each format gets its own loop with the channel positions
 /// known at compile time, which lets the compiler vectorise it.
@@ -157,12 +186,7 @@ pub fn separable_filter(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, ke
         }
         // Pad the row once, then a sum of shifted copies (one vector op per tap).
         let mut padded = vec![0f32; (w + 2 * r) * c];
-        for (px, chunk) in padded.chunks_exact_mut(c).enumerate() {
-            let sx = reflect101(px as i64 - r as i64, w);
-            for ch in 0..c {
-                chunk[ch] = src[sx * c + ch] as f32;
-            }
-        }
+        pad_row(src, c, r, &mut padded, |v| v as f32);
         dst.fill(0.0);
         for (t, &kw) in kernel.iter().enumerate() {
             let shifted = &padded[t * c..t * c + row_len];
@@ -232,13 +256,7 @@ pub fn separable_filter_q8(input: &ImageView<'_>, output: &mut ImageViewMut<'_>,
         return separable_filter(input, output, kernel);
     }
     let hpass = |y: usize, padded: &mut [u16], dst: &mut [u16]| {
-        let src = input.row(y);
-        for (px, chunk) in padded.chunks_exact_mut(c).enumerate() {
-            let sx = reflect101(px as i64 - r as i64, w);
-            for (d, s) in chunk.iter_mut().zip(&src[sx * c..sx * c + c]) {
-                *d = *s as u16;
-            }
-        }
+        pad_row(input.row(y), c, r, padded, |v| v as u16);
         // The kernel is symmetric: taps t and 2r - t share a weight, so each pair is one
         // multiply of the two samples' sum (the same integers, modulo 2^16, as tap by tap).
         let centre = &padded[r * c..r * c + row_len];
@@ -720,11 +738,7 @@ impl FloatImage {
             .for_each(|(y, dst)| {
                 let src = self.row(y);
                 let mut padded = vec![0f32; (w + 2 * r) * c];
-                padded[r * c..(r + w) * c].copy_from_slice(src);
-                for px in (0..r).chain(r + w..w + 2 * r) {
-                    let sx = reflect101(px as i64 - r as i64, w);
-                    padded[px * c..px * c + c].copy_from_slice(&src[sx * c..sx * c + c]);
-                }
+                pad_row_copy(src, c, r, &mut padded);
                 for (t, &kw) in kernel.iter().enumerate() {
                     for (d, s) in dst.iter_mut().zip(&padded[t * c..t * c + row_len]) {
                         *d += kw * s;
@@ -756,10 +770,7 @@ impl FloatImage {
             .enumerate()
             .for_each(|(y, row)| {
                 let src = self.row(reflect101(y as i64 - p as i64, h));
-                for (x, px) in row.chunks_exact_mut(c).enumerate() {
-                    let sx = reflect101(x as i64 - p as i64, w);
-                    px.copy_from_slice(&src[sx * c..sx * c + c]);
-                }
+                pad_row_copy(src, c, p, row);
             });
         FloatImage {
             w: pw,
