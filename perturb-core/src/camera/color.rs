@@ -332,18 +332,33 @@ pub fn clahe(plane: &[u8], w: usize, h: usize, clip: f64, tiles: usize) -> Vec<u
         (t1c, t2c, a)
     };
     let xs: Vec<(usize, usize, f32)> = (0..w).map(|x| coord(x, inv_tw)).collect();
+    // Runs of columns that blend the same pair of tile columns: the four tables are picked once
+    // per run, not per pixel.
+    let mut runs: Vec<(usize, usize, usize, usize)> = Vec::new();
+    for (x, &(tx1, tx2, _)) in xs.iter().enumerate() {
+        match runs.last_mut() {
+            Some(run) if (run.2, run.3) == (tx1, tx2) => run.1 = x + 1,
+            _ => runs.push((x, x + 1, tx1, tx2)),
+        }
+    }
     let mut out = vec![0u8; w * h];
     out.par_chunks_mut(w.max(1))
         .enumerate()
         .for_each(|(y, row)| {
             let (ty1, ty2, ya) = coord(y, inv_th);
-            for (x, o) in row.iter_mut().enumerate() {
-                let (tx1, tx2, xa) = xs[x];
-                let v = plane[y * w + x] as usize;
-                let l = |tx: usize, ty: usize| luts[ty * tiles + tx][v] as f32;
-                let top = l(tx1, ty1) * (1.0 - xa) + l(tx2, ty1) * xa;
-                let bot = l(tx1, ty2) * (1.0 - xa) + l(tx2, ty2) * xa;
-                *o = (top * (1.0 - ya) + bot * ya).round().clamp(0.0, 255.0) as u8;
+            let src = &plane[y * w..(y + 1) * w];
+            for &(x0, x1, tx1, tx2) in &runs {
+                let lut = |tx: usize, ty: usize| &luts[ty * tiles + tx];
+                let (a, b) = (lut(tx1, ty1), lut(tx2, ty1));
+                let (c, d) = (lut(tx1, ty2), lut(tx2, ty2));
+                for ((o, &v), &(_, _, xa)) in
+                    row[x0..x1].iter_mut().zip(&src[x0..x1]).zip(&xs[x0..x1])
+                {
+                    let v = v as usize;
+                    let top = a[v] as f32 * (1.0 - xa) + b[v] as f32 * xa;
+                    let bot = c[v] as f32 * (1.0 - xa) + d[v] as f32 * xa;
+                    *o = (top * (1.0 - ya) + bot * ya).round().clamp(0.0, 255.0) as u8;
+                }
             }
         });
     out

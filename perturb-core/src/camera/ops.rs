@@ -449,7 +449,6 @@ where
 {
     let format = input.format;
     let c = format.channels();
-    let rgb = format.rgb_offsets();
     let recip = reciprocals();
     par_rows(input, output, |y, src, dst| {
         if format.is_mono() {
@@ -458,36 +457,34 @@ where
             }
             return;
         }
-        // Per pixel the factor nv / v in 8.24 fixed point, and 1 where v = 0 (black: every
-        // channel becomes nv, through the factor nv).
-        let gains: Vec<(u32, u32)> = src
-            .chunks_exact(c)
-            .enumerate()
-            .map(|(x, p)| {
-                let v = p[rgb[0]].max(p[rgb[1]]).max(p[rgb[2]]);
-                let nv = vmap(y, x, v) as u64;
-                if v == 0 {
-                    ((nv << 24) as u32, 1)
-                } else {
-                    (((nv * recip[v as usize] + 255) >> 8) as u32, 0)
-                }
-            })
-            .collect();
         match c {
-            3 => value_row::<3>(src, dst, rgb, &gains),
-            _ => value_row::<4>(src, dst, rgb, &gains),
+            3 => value_row::<3, F>(src, dst, y, &vmap, recip),
+            _ => value_row::<4, F>(src, dst, y, &vmap, recip),
         }
         copy_alpha(format, src, dst);
     });
 }
 
-/// One row of [`map_value`]: colour channel `p` becomes `round((p + z) k / 2^24)` for the pixel's
-/// `(k, z)`. A channel is at most v, so the product stays below 2^32; the factor's error (under
-/// 2^-15 of a level) and the small bias cannot cross a rounding boundary, which sits at least
-/// 1 / 510 of a level from any p nv / v: exact halves round up.
-fn value_row<const C: usize>(src: &[u8], dst: &mut [u8], rgb: [usize; 3], gains: &[(u32, u32)]) {
-    for ((p, q), &(k, z)) in src.chunks_exact(C).zip(dst.chunks_exact_mut(C)).zip(gains) {
-        for ch in rgb {
+/// One row of [`map_value`]. Per pixel the factor `k = nv / v` in 8.24 fixed point (and `z =
+/// 0`), or `k = nv`, `z = 1` where v = 0 (black: every channel becomes nv); colour channel `p`
+/// becomes `round((p + z) k / 2^24)`. A channel is at most v, so the product stays below 2^32;
+/// the factor's error (under 2^-15 of a level) and the small bias cannot cross a rounding
+/// boundary, which sits at least 1 / 510 of a level from any p nv / v: exact halves round up.
+/// Every colour format keeps its three colour bytes first (alpha, if any, is byte 3), and the
+/// formula is the same for each of them, so the channel order does not matter here.
+fn value_row<const C: usize, F>(src: &[u8], dst: &mut [u8], y: usize, vmap: &F, recip: &[u64; 256])
+where
+    F: Fn(usize, usize, u8) -> u8,
+{
+    for (x, (p, q)) in src.chunks_exact(C).zip(dst.chunks_exact_mut(C)).enumerate() {
+        let v = p[0].max(p[1]).max(p[2]);
+        let nv = vmap(y, x, v) as u64;
+        let (k, z) = if v == 0 {
+            ((nv << 24) as u32, 1)
+        } else {
+            (((nv * recip[v as usize] + 255) >> 8) as u32, 0)
+        };
+        for ch in 0..3 {
             q[ch] = (((p[ch] as u32 + z) * k + (1 << 23) + (1 << 12)) >> 24) as u8;
         }
     }
@@ -1003,6 +1000,26 @@ mod tests {
                 };
                 assert_eq!(q[ch] as u32, want, "pixel {p:?} channel {ch}");
             }
+        }
+        // Every other format gives the same pixels, alpha copied.
+        for format in PixelFormat::ALL.into_iter().filter(|f| !f.is_mono()) {
+            let mut src = img.convert(format);
+            if let Some(a) = format.alpha_offset() {
+                let c = format.channels();
+                src.data.iter_mut().skip(a).step_by(c).for_each(|v| *v = 77);
+            }
+            let mut got = Image::new(w, 1, format);
+            map_value(&src.view(), &mut got.view_mut(), |_, _, v| nv(v));
+            let mut want = out.convert(format);
+            if let Some(a) = format.alpha_offset() {
+                let c = format.channels();
+                want.data
+                    .iter_mut()
+                    .skip(a)
+                    .step_by(c)
+                    .for_each(|v| *v = 77);
+            }
+            assert_eq!(got, want, "{format:?}");
         }
     }
 
