@@ -525,20 +525,8 @@ impl PhaseScrambling {
     /// the phase `s pi (q + 0.5) / 4096`.
     fn column_draws(&self, seq: u64, channel: usize, kx: usize, out: &mut [u16]) {
         let mut rng = super::ops::row_rng(self.seed, seq, 0xF2 + ((channel as u64) << 32), kx);
-        // The top PHASE_BITS of each 16-bit quarter of a 64-bit draw, low quarter first.
-        let quarters = |bits: u64| {
-            let q = |i: u32| (bits >> (16 * i + 16 - PHASE_BITS)) as u16 & 0xFFF;
-            [q(0), q(1), q(2), q(3)]
-        };
-        let mut quads = out.chunks_exact_mut(4);
-        for quad in &mut quads {
-            quad.copy_from_slice(&quarters(rng.next_u64()));
-        }
-        let rest = quads.into_remainder();
-        if !rest.is_empty() {
-            let n = rest.len();
-            rest.copy_from_slice(&quarters(rng.next_u64())[..n]);
-        }
+        // The top PHASE_BITS of each 16-bit draw.
+        super::ops::fill_quarters(&mut rng, out, |q| q >> (16 - PHASE_BITS));
     }
 
     /// The tiling of the half spectrum: (tiles of [`COLUMN_BLOCK`] columns, bands of
@@ -711,31 +699,22 @@ impl CameraPerturbation for PhaseScrambling {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
         let w = input.width as usize;
         let format = input.format;
-        let c = format.channels();
-        let colour: Vec<usize> = if format.is_mono() {
-            vec![0]
-        } else {
-            format.rgb_offsets().to_vec()
-        };
-        let nc = colour.len();
+        let nc = format.color_channels();
         let mut buf = {
             let mut spare = self.spare.lock().unwrap_or_else(|e| e.into_inner());
             spare.pop().unwrap_or_default()
         };
         // Colour channels are read and written in one pass over each row (three strided passes
         // cost more than the row transforms).
-        let one = |p: &[u8], k: usize| p[colour[k]];
         self.forward_rows(nc, &mut buf, &|y, lines| {
-            let src = input.row(y).chunks_exact(c);
+            let src = input.row(y);
             if nc == 3 {
                 let (l0, rest) = lines.split_at_mut(w);
                 let (l1, l2) = rest.split_at_mut(w);
-                for (((p, a), b), d) in src.zip(l0).zip(l1).zip(l2) {
-                    (*a, *b, *d) = (one(p, 0) as f32, one(p, 1) as f32, one(p, 2) as f32);
-                }
+                super::ops::split_rgb(src, format, [l0, l1, l2]);
             } else {
-                for (d, p) in lines.iter_mut().zip(src) {
-                    *d = one(p, 0) as f32;
+                for (d, &v) in lines.iter_mut().zip(src) {
+                    *d = v as f32;
                 }
             }
         });
@@ -746,26 +725,26 @@ impl CameraPerturbation for PhaseScrambling {
         rows.par_chunks_mut(ROW_BAND).enumerate().for_each_init(
             || {
                 let work = (Vec::new(), self.plan.c2r.make_scratch_vec());
-                (vec![0f32; nc * ROW_BAND * w], work)
+                (vec![0f32; nc * ROW_BAND * w], vec![0u8; nc * w], work)
             },
-            |(planes, work), (i, band)| {
+            |(planes, bytes, work), (i, band)| {
                 let (y0, n) = (i * ROW_BAND, band.len());
                 for (k, plane) in planes.chunks_exact_mut(ROW_BAND * w).enumerate() {
                     self.inverse_rows(&buf, k, y0, &mut plane[..n * w], work);
                 }
-                let plane = |k: usize, r: usize| &planes[(k * ROW_BAND + r) * w..][..w];
                 for (r, dst) in band.iter_mut().enumerate() {
-                    let px = dst.chunks_exact_mut(c);
+                    for (k, out) in bytes.chunks_exact_mut(w).enumerate() {
+                        let plane = &planes[(k * ROW_BAND + r) * w..][..w];
+                        for (b, &v) in out.iter_mut().zip(plane) {
+                            *b = byte(v);
+                        }
+                    }
                     if nc == 3 {
-                        let rgb = plane(0, r).iter().zip(plane(1, r)).zip(plane(2, r));
-                        for (d, ((&a, &b), &e)) in px.zip(rgb) {
-                            (d[colour[0]], d[colour[1]], d[colour[2]]) =
-                                (byte(a), byte(b), byte(e));
-                        }
+                        let (b0, rest) = bytes.split_at(w);
+                        let (b1, b2) = rest.split_at(w);
+                        super::ops::merge_rgb(format, [b0, b1, b2], dst);
                     } else {
-                        for (d, &v) in px.zip(plane(0, r)) {
-                            d[colour[0]] = byte(v);
-                        }
+                        dst.copy_from_slice(bytes);
                     }
                     super::ops::copy_alpha(format, input.row(y0 + r), dst);
                 }

@@ -1,6 +1,8 @@
 //! Distortion family (C-D): geometric and sharpness changes.
 
-use super::ops::{copy_alpha, gaussian_kernel, par_rows, reflect101, row_rng};
+use super::ops::{
+    copy_alpha, fill_quarters, gaussian_kernel, pad_row_copy, par_rows, reflect101, row_rng,
+};
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut};
 use crate::rng::Rng;
@@ -100,31 +102,15 @@ impl Elastic {
         // (u + 1/2) / 2^15 - 1 for a 16-bit u: centred, steps of 2^-15 alpha (the remap rounds
         // to 1/32 pixel).
         let (unit, offset) = (self.alpha / 32768.0, self.alpha * (0.5 / 32768.0 - 1.0));
-        let quarters = |bits: u64| {
-            let q = |i: u32| ((bits >> (16 * i)) & 0xFFFF) as f32 * unit + offset;
-            [q(0), q(1), q(2), q(3)]
-        };
-        let mut quads = row.chunks_exact_mut(4);
-        for quad in &mut quads {
-            quad.copy_from_slice(&quarters(rng.next_u64()));
-        }
-        let rest = quads.into_remainder();
-        if !rest.is_empty() {
-            let n = rest.len();
-            rest.copy_from_slice(&quarters(rng.next_u64())[..n]);
-        }
+        fill_quarters(&mut rng, row, |u| u as f32 * unit + offset);
     }
 
     /// Horizontal smoothing of a raw row (reflect-101): the row padded once, then one shifted
     /// multiply-add per pair of symmetric taps.
     fn smooth_row(&self, raw: &[f32], padded: &mut Vec<f32>, out: &mut [f32]) {
         let (w, r) = (raw.len(), self.kernel.len() / 2);
-        // Only the r samples at each end reflect; the middle is the row itself.
-        padded.clear();
-        let edge = |p: usize| raw[reflect101(p as i64 - r as i64, w)];
-        padded.extend((0..r).map(edge));
-        padded.extend_from_slice(raw);
-        padded.extend((r + w..w + 2 * r).map(edge));
+        padded.resize(w + 2 * r, 0.0);
+        pad_row_copy(raw, 1, r, padded);
         // The kernel is symmetric: taps t and 2r - t share one multiply.
         let kc = self.kernel[r];
         for (o, s) in out.iter_mut().zip(&padded[r..r + w]) {

@@ -7,7 +7,7 @@
 
 #[cfg(test)]
 use super::CameraSetup;
-use super::ops::{copy_alpha, merge_rgb, par_rows, row_rng, split_rgb};
+use super::ops::{copy_alpha, frame_buffer, merge_rgb, par_rows, recycle, row_rng, split_rgb};
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
 use crate::rng::{Rng, normal_quantile};
@@ -297,9 +297,6 @@ pub struct JpegCompression {
     /// Orthonormal DCT-II matrix: `m[u][x] = c(u)/2 cos((2x+1)u pi/16)` (its transpose is the
     /// inverse transform).
     m: Block,
-    /// Plane buffers of finished frames, reused by the next ones (fresh pages cost a fault and a
-    /// zeroing each, a third of the frame at 2.3 MP).
-    spare: std::sync::Mutex<Vec<Vec<f32>>>,
 }
 
 type Block = [[f32; 8]; 8];
@@ -393,7 +390,6 @@ pub const JPEG: CameraBuilder = |s| {
         luma_q: scaled_table(&LUMA_Q, q),
         chroma_q: scaled_table(&CHROMA_Q, q),
         m,
-        spare: std::sync::Mutex::new(Vec::new()),
     }))
 };
 
@@ -405,12 +401,19 @@ struct Plane {
 }
 
 impl Plane {
-    /// A `w x h` plane in `data` (resized; its old contents are left for the caller to
-    /// overwrite).
-    fn new(w: usize, h: usize, mut data: Vec<f32>) -> Self {
+    /// A zeroed `w x h` plane, in a finished frame's buffer when one is free (fresh pages cost
+    /// a fault and a zeroing each; see [`frame_buffer`]). Hand it back with [`Plane::recycle`].
+    fn new(w: usize, h: usize) -> Self {
         let (pw, ph) = (w.div_ceil(8) * 8, h.div_ceil(8) * 8);
-        data.resize(pw * ph.max(8), 0.0);
-        Plane { w: pw, data }
+        Plane {
+            w: pw,
+            data: frame_buffer(pw * ph.max(8)),
+        }
+    }
+
+    /// Returns the plane's buffer for the next frame.
+    fn recycle(self) {
+        recycle(self.data);
     }
 
     /// Replicates the last real column and row into the padding.
@@ -429,12 +432,6 @@ impl Plane {
 }
 
 impl JpegCompression {
-    /// Keeps plane buffers for the next frame.
-    fn recycle(&self, bufs: impl IntoIterator<Item = Vec<f32>>) {
-        let mut pool = self.spare.lock().unwrap_or_else(|e| e.into_inner());
-        pool.extend(bufs.into_iter().filter(|b| b.capacity() > 0));
-    }
-
     /// DCT, quantise, dequantise, inverse DCT of every 8x8 block of `p` (level-shifted by 128),
     /// in place, in parallel over block rows.
     fn roundtrip_plane(&self, p: &mut Plane, q: &[f32; 64]) {
@@ -531,21 +528,8 @@ impl CameraPerturbation for JpegCompression {
         use rayon::prelude::*;
         let (w, h) = (input.width as usize, input.height as usize);
         let f = input.format;
-        let mut spare = {
-            let mut pool = self.spare.lock().unwrap_or_else(|e| e.into_inner());
-            std::mem::take(&mut *pool)
-        };
-        // The smallest kept buffer that holds `need` floats, else the largest (which grows).
-        let mut take = |need: usize| {
-            let fits = (0..spare.len())
-                .filter(|&i| spare[i].capacity() >= need)
-                .min_by_key(|&i| spare[i].capacity());
-            let best = fits.or_else(|| (0..spare.len()).max_by_key(|&i| spare[i].capacity()));
-            best.map(|i| spare.swap_remove(i)).unwrap_or_default()
-        };
-        let size = |w: usize, h: usize| w.div_ceil(8) * 8 * (h.div_ceil(8) * 8).max(8);
         if f.is_mono() {
-            let mut y = Plane::new(w, h, take(size(w, h)));
+            let mut y = Plane::new(w, h);
             let pw = y.w;
             y.data
                 .par_chunks_mut(pw)
@@ -563,13 +547,13 @@ impl CameraPerturbation for JpegCompression {
                     *d = (y.data[r * pw + x] + 0.5) as u8;
                 }
             });
-            self.recycle(spare.into_iter().chain([y.data]));
+            y.recycle();
             return;
         }
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-        let mut yp = Plane::new(w, h, take(size(w, h)));
-        let mut cb = Plane::new(cw, ch, take(size(cw, ch)));
-        let mut cr = Plane::new(cw, ch, take(size(cw, ch)));
+        let mut yp = Plane::new(w, h);
+        let mut cb = Plane::new(cw, ch);
+        let mut cr = Plane::new(cw, ch);
         let (ypw, cpw) = (yp.w, cb.w);
         // Colour conversion and 2x2 chroma averaging, one pair of image rows per chroma row.
         yp.data
@@ -582,8 +566,6 @@ impl CameraPerturbation for JpegCompression {
                 |work, (cy, (ypair, (cbrow, crrow)))| {
                     let r0 = 2 * cy;
                     let nrows = (h - r0).min(2);
-                    cbrow.fill(0.0);
-                    crrow.fill(0.0);
                     for k in 0..nrows {
                         let yrow = &mut ypair[k * ypw..k * ypw + w];
                         to_ycc(input.row(r0 + k), f, work, yrow, cbrow, crrow);
@@ -648,7 +630,9 @@ impl CameraPerturbation for JpegCompression {
                     copy_alpha(f, input.row(r), dst);
                 },
             );
-        self.recycle(spare.into_iter().chain([yp.data, cb.data, cr.data]));
+        for p in [yp, cb, cr] {
+            p.recycle();
+        }
     }
 }
 

@@ -27,6 +27,22 @@ pub fn row_rng(seed: u64, seq: u64, salt: u64, y: usize) -> Rng {
     Rng::from_key(crate::rng::hash(&[seed, seq, salt, y as u64]))
 }
 
+/// Fills `out` with `f` of successive 16-bit draws from `rng`, four per 64-bit output, low
+/// quarter first (a fixed block of four per output, which the compiler keeps in registers).
+#[inline]
+pub fn fill_quarters<T: Copy>(rng: &mut Rng, out: &mut [T], f: impl Fn(u16) -> T) {
+    let quarters = |bits: u64| [0, 1, 2, 3].map(|i| f((bits >> (16 * i)) as u16));
+    let mut quads = out.chunks_exact_mut(4);
+    for quad in &mut quads {
+        quad.copy_from_slice(&quarters(rng.next_u64()));
+    }
+    let rest = quads.into_remainder();
+    if !rest.is_empty() {
+        let n = rest.len();
+        rest.copy_from_slice(&quarters(rng.next_u64())[..n]);
+    }
+}
+
 /// Copies the alpha byte of every pixel of `src` into `dst` (no-op for formats without alpha).
 #[inline]
 pub fn copy_alpha(format: PixelFormat, src: &[u8], dst: &mut [u8]) {
