@@ -1,7 +1,7 @@
 //! Blur family (C-B): convolutions and resampling that remove detail.
 
 use super::ops::{
-    GaussianRows, copy_alpha, gaussian_blur, map_value, par_rows, reflect101, row_rng,
+    GaussianRows, byte, copy_alpha, gaussian_blur, map_value, par_rows, reflect101, row_rng,
 };
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{Image, ImageView, ImageViewMut, PixelFormat};
@@ -272,7 +272,7 @@ impl CameraPerturbation for MotionBlur {
                 }
             }
             for (d, a) in dst.iter_mut().zip(&acc) {
-                *d = (*a as f32 * norm + 0.5) as u8;
+                *d = byte(*a as f32 * norm + 0.5);
             }
             copy_alpha(format, src, dst);
         });
@@ -553,7 +553,7 @@ impl CameraPerturbation for HighPass {
             gaussian.row(y, &mut blurred);
             for ((d, &s), b) in dst.iter_mut().zip(src).zip(&mut blurred) {
                 *b = 2.0 * s as f32 - *b;
-                *d = ((*b + 0.5) as i32).clamp(0, 255) as u8;
+                *d = byte(*b + 0.5);
             }
             copy_alpha(format, src, dst);
         });

@@ -720,7 +720,7 @@ impl CameraPerturbation for PhaseScrambling {
         });
         self.scramble_columns(nc, &mut buf, seq);
         let norm = 1.0 / (w * self.plan.h) as f32;
-        let byte = |v: f32| (v * norm + 0.5).clamp(0.0, 255.0) as u8;
+        let byte = |v: f32| super::ops::byte(v * norm + 0.5);
         let mut rows = output.rows_mut();
         rows.par_chunks_mut(ROW_BAND).enumerate().for_each_init(
             || {

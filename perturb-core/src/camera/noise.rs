@@ -7,7 +7,9 @@
 
 #[cfg(test)]
 use super::CameraSetup;
-use super::ops::{copy_alpha, frame_buffer, merge_rgb, par_rows, recycle, row_rng, split_rgb};
+use super::ops::{
+    byte, copy_alpha, frame_buffer, merge_rgb, par_rows, recycle, row_rng, split_rgb,
+};
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
 use crate::rng::{Rng, normal_quantile};
@@ -438,7 +440,9 @@ impl JpegCompression {
         use rayon::prelude::*;
         let pw = p.w;
         let m = &self.m;
-        let qinv = q.map(|v| 1.0 / v);
+        // The tables transposed, as the coefficients come out of the forward pass.
+        let q_t: Block = std::array::from_fn(|v| std::array::from_fn(|u| q[u * 8 + v]));
+        let qinv_t = q_t.map(|row| row.map(|v| 1.0 / v));
         p.data.par_chunks_mut(pw * 8).for_each(|band| {
             for bx in 0..pw / 8 {
                 let mut blk = [[0f32; 8]; 8];
@@ -447,15 +451,16 @@ impl JpegCompression {
                         *v = band[y * pw + bx * 8 + x] - 128.0;
                     }
                 }
-                // Forward: C = M B M^T = (M (M B)^T)^T; quantise and dequantise.
-                let mut c = transpose8(&dct8(m, &transpose8(&dct8(m, &blk))));
-                for (u, row) in c.iter_mut().enumerate() {
-                    for (v, coef) in row.iter_mut().enumerate() {
-                        *coef = round_f32(*coef * qinv[u * 8 + v]) * q[u * 8 + v];
+                // Forward: the coefficients C = M B M^T come out transposed, C^T = M (M B)^T,
+                // which saves two transposes; they are quantised and dequantised as C^T.
+                let mut ct = dct8(m, &transpose8(&dct8(m, &blk)));
+                for (row, (qi, qr)) in ct.iter_mut().zip(qinv_t.iter().zip(&q_t)) {
+                    for ((coef, qi), q) in row.iter_mut().zip(qi).zip(qr) {
+                        *coef = round_f32(*coef * qi) * q;
                     }
                 }
-                // Inverse: B = M^T C M = (M^T (M^T C)^T)^T.
-                let b = transpose8(&idct8(m, &transpose8(&idct8(m, &c))));
+                // Inverse: B = M^T C M = M^T (M^T C^T)^T.
+                let b = idct8(m, &transpose8(&idct8(m, &ct)));
                 for (y, row) in b.iter().enumerate() {
                     for (x, v) in row.iter().enumerate() {
                         band[y * pw + bx * 8 + x] = (v + 128.0).clamp(0.0, 255.0);
@@ -514,12 +519,28 @@ fn to_ycc(
 fn upsample_row(t: &[f32], out: &mut [f32]) {
     let n = t.len();
     let f = |c: f32, side: f32| (3.0 * c + side) * (1.0 / 16.0) - 128.0;
-    for (i, pair) in out.chunks_mut(2).enumerate() {
+    // The edge samples (which replicate their neighbour) first, then the interior without
+    // index clamps (it vectorises).
+    let edge = |i: usize, pair: &mut [f32]| {
         let c = t[i];
         pair[0] = f(c, t[i.saturating_sub(1)]);
         if let Some(odd) = pair.get_mut(1) {
             *odd = f(c, t[(i + 1).min(n - 1)]);
         }
+    };
+    let mut pairs = out.chunks_mut(2);
+    for (i, pair) in pairs.by_ref().take(1).enumerate() {
+        edge(i, pair);
+    }
+    if n > 2 {
+        for (pair, win) in pairs.by_ref().take(n - 2).zip(t.windows(3)) {
+            pair[0] = f(win[1], win[0]);
+            pair[1] = f(win[1], win[2]);
+        }
+    }
+    let done = if n > 2 { n - 1 } else { 1 };
+    for (i, pair) in pairs.enumerate() {
+        edge(done + i, pair);
     }
 }
 
@@ -544,7 +565,7 @@ impl CameraPerturbation for JpegCompression {
             self.roundtrip_plane(&mut y, &self.luma_q);
             par_rows(input, output, |r, _, dst| {
                 for (x, d) in dst.iter_mut().enumerate() {
-                    *d = (y.data[r * pw + x] + 0.5) as u8;
+                    *d = byte(y.data[r * pw + x] + 0.5);
                 }
             });
             y.recycle();
@@ -570,10 +591,12 @@ impl CameraPerturbation for JpegCompression {
                         let yrow = &mut ypair[k * ypw..k * ypw + w];
                         to_ycc(input.row(r0 + k), f, work, yrow, cbrow, crrow);
                     }
-                    for cx in 0..cw {
-                        let n = (nrows * ((2 * cx + 2).min(w) - 2 * cx)) as f32;
-                        cbrow[cx] = cbrow[cx] / n + 128.0;
-                        crrow[cx] = crrow[cx] / n + 128.0;
+                    // Averages of 1, 2 or 4 samples: a power of two, so multiplying by the
+                    // reciprocal is exact.
+                    for (cx, (b, r)) in cbrow[..cw].iter_mut().zip(&mut crrow[..cw]).enumerate() {
+                        let inv = 1.0 / (nrows * ((2 * cx + 2).min(w) - 2 * cx)) as f32;
+                        *b = *b * inv + 128.0;
+                        *r = *r * inv + 128.0;
                     }
                 },
             );
@@ -587,9 +610,7 @@ impl CameraPerturbation for JpegCompression {
         // 1/4 in each direction (9/16, 3/16, 3/16, 1/16): vertical weights first, then
         // horizontal, then the colour conversion on contiguous rows (vectorisable); the bytes are
         // interleaved last.
-        // max/min rather than clamp: no NaN case to carry, and the loop vectorises.
-        #[allow(clippy::manual_clamp)]
-        let to_u8 = |f: f32| f.max(0.0).min(255.0) as u8;
+
         let vertical = |p: &Plane, cy: usize, ny: usize, t: &mut [f32]| {
             let (a, b) = (&p.data[cy * cpw..][..cw], &p.data[ny * cpw..][..cw]);
             for ((d, a), b) in t.iter_mut().zip(a).zip(b) {
@@ -622,9 +643,9 @@ impl CameraPerturbation for JpegCompression {
                         yuv.zip(p0.iter_mut()).zip(p1.iter_mut()).zip(p2.iter_mut())
                     {
                         let yy = y + 0.5;
-                        *pr = to_u8(yy + 1.402 * v);
-                        *pg = to_u8(yy - 0.344_136 * u - 0.714_136 * v);
-                        *pb = to_u8(yy + 1.772 * u);
+                        *pr = byte(yy + 1.402 * v);
+                        *pg = byte(yy - 0.344_136 * u - 0.714_136 * v);
+                        *pb = byte(yy + 1.772 * u);
                     }
                     merge_rgb(f, [&*p0, &*p1, &*p2], dst);
                     copy_alpha(f, input.row(r), dst);

@@ -239,7 +239,7 @@ pub fn separable_filter(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, ke
                     }
                 }
                 for (o, a) in out.iter_mut().zip(&acc) {
-                    *o = (a + 0.5).clamp(0.0, 255.0) as u8;
+                    *o = byte(a + 0.5);
                 }
                 copy_alpha(format, input.row(y), out);
             }
@@ -921,8 +921,26 @@ impl GaussianRows {
 #[inline]
 pub fn round_u8(src: &[f32], dst: &mut [u8]) {
     for (d, s) in dst.iter_mut().zip(src) {
-        *d = ((s + 0.5) as i32).clamp(0, 255) as u8;
+        *d = byte(s + 0.5);
     }
+}
+
+/// `v as u8`: `v` truncated toward zero and saturated to 0..=255, NaN to 0; but written so that
+/// loops over it vectorise (Rust's saturating float-to-int casts compile to a scalar conversion
+/// and NaN test per value). The clamped value is floored (one instruction with SSE4.1) and
+/// added to 2^23, which puts the integer in the low bits of the mantissa.
+///
+/// ```
+/// # use perturb_core::camera::ops::byte;
+/// assert_eq!(byte(254.9), 254);
+/// assert_eq!(byte(-3.0), 0);
+/// assert_eq!(byte(1e9), 255);
+/// ```
+#[inline(always)]
+// max then min, not clamp: max maps NaN to 0, clamp would carry it on.
+#[allow(clippy::manual_clamp)]
+pub fn byte(v: f32) -> u8 {
+    (v.max(0.0).min(255.0).floor() + 8_388_608.0).to_bits() as u8
 }
 
 /// A Gaussian blur written into `output` (u8, rounded); see [`GaussianRows`]. Kernels applied
@@ -948,6 +966,29 @@ pub fn gaussian_blur(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, k: us
 mod tests {
     use super::*;
     use crate::image::Image;
+
+    #[test]
+    fn byte_is_the_saturating_cast() {
+        // Every f32 between -2 and 258 in steps of 1/64 (exact halves and integers included),
+        // the largest values below each integer, and the special values.
+        let mut values: Vec<f32> = (-128..=258 * 64).map(|i| i as f32 / 64.0).collect();
+        values.extend((1..=256).map(|k| f32::from_bits((k as f32).to_bits() - 1)));
+        values.extend([
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN,
+            -0.0,
+            1e-30,
+            255.999_99,
+            256.0,
+            8_388_608.0,
+        ]);
+        for v in values {
+            assert_eq!(byte(v), v as u8, "byte({v})");
+        }
+    }
 
     #[test]
     fn split_and_merge_rgb_follow_each_formats_channel_positions() {
