@@ -8,55 +8,94 @@ use crate::image::{ImageView, ImageViewMut};
 use crate::rng::Rng;
 use rayon::prelude::*;
 
+/// The source pixels a band of remapped rows can reach: rows `top..top + rows` and columns
+/// `-pad..w + pad` of the image, reflected (reflect-101) where they fall outside it, as one
+/// contiguous block, so that a bilinear tap is four reads at fixed offsets with no border test.
+struct Window {
+    data: Vec<u8>,
+    /// Bytes per window row: `(w + 2 pad) c`.
+    stride: usize,
+    top: i64,
+    pad: usize,
+}
+
+impl Window {
+    /// The window over rows `top..top + rows` of `input`, `pad` pixels of margin each side.
+    fn new(input: &ImageView<'_>, top: i64, rows: usize, pad: usize) -> Self {
+        let (w, h, c) = (
+            input.width as usize,
+            input.height as usize,
+            input.format.channels(),
+        );
+        let stride = (w + 2 * pad) * c;
+        let mut data = vec![0u8; stride * rows];
+        for (i, out) in data.chunks_exact_mut(stride).enumerate() {
+            let src = input.row(reflect101(top + i as i64, h));
+            out[pad * c..(pad + w) * c].copy_from_slice(src);
+            for k in 0..pad {
+                let (l, r) = (k as i64 - pad as i64, (w + k) as i64);
+                for (x, at) in [(l, k), (r, pad + w + k)] {
+                    let sx = reflect101(x, w) * c;
+                    out[at * c..at * c + c].copy_from_slice(&src[sx..sx + c]);
+                }
+            }
+        }
+        Window {
+            data,
+            stride,
+            top,
+            pad,
+        }
+    }
+}
+
 /// One output row of `cv2.remap` with bilinear interpolation in OpenCV's fixed point: each source
 /// coordinate is rounded to 1/32 pixel (`INTER_BITS` = 5) and the four weights are products of
-/// those fractions (exact in 1/1024), rounded once; borders reflect (reflect-101). Pixel `x` of
-/// row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel, all interpolated. `columns`
-/// holds x as f32 for each x; `reach` bounds |dy| (the source rows within it are looked up once
-/// per row).
+/// those fractions (exact in 1/1024), rounded once; borders reflect (reflect-101, through the
+/// window's margins). Pixel `x` of row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel,
+/// all interpolated. `columns` holds x as f32 for each x; the displacements must stay within the
+/// window's margin less one pixel (they are clamped to it, so a larger one cannot read outside).
 fn remap_row<const C: usize>(
-    input: &ImageView<'_>,
+    win: &Window,
     y: usize,
-    (columns, dx, dy, reach): (&[f32], &[f32], &[f32], f32),
+    (columns, dx, dy): (&[f32], &[f32], &[f32]),
     dst: &mut [u8],
 ) {
-    let (w, h) = (input.width as usize, input.height as usize);
-    let span = reach.ceil() as i64 + 2;
-    let top = y as i64 - span;
-    let rows: Vec<&[u8]> = (top..=y as i64 + span + 1)
-        .map(|sy| input.row(reflect101(sy, h)))
-        .collect();
-    let row_at = |sy: i64| match rows.get((sy - top) as usize) {
-        Some(r) if sy >= top => *r,
-        _ => input.row(reflect101(sy, h)),
-    };
-    // Source coordinates in 1/32 pixel, rounded half to even, in two vectorisable passes: adding
+    // Source coordinates in 1/32 pixel, rounded half to even, in vectorisable passes: adding
     // 1.5 2^23 leaves the rounded integer in the low mantissa bits (exact for |v| < 2^22).
     let round = |v: f32| ((v + 12_582_912.0).to_bits() as i32).wrapping_sub(0x4B40_0000);
-    let fxs: Vec<i32> = dx
+    let w = columns.len() as i32;
+    let pad = win.pad as i32;
+    let (rows, stride) = ((win.data.len() / win.stride) as i32, win.stride as i32);
+    let (yf, top) = (y as f32, win.top as i32);
+    // Per pixel: the window offset of its top-left tap and the two fractions.
+    let taps: Vec<(u32, u32, u32)> = dx
         .iter()
         .zip(columns)
-        .map(|(&ox, &x)| round((x + ox) * 32.0))
+        .zip(dy)
+        .map(|((&ox, &x), &oy)| {
+            let (fx, fy) = (round((x + ox) * 32.0), round((yf + oy) * 32.0));
+            let wx = (pad + (fx >> 5)).clamp(0, w + 2 * pad - 2);
+            let wy = ((fy >> 5) - top).clamp(0, rows - 2);
+            (
+                (wy * stride + wx * C as i32) as u32,
+                (fx & 31) as u32,
+                (fy & 31) as u32,
+            )
+        })
         .collect();
-    let fys: Vec<i32> = dy.iter().map(|&oy| round((y as f32 + oy) * 32.0)).collect();
-    for ((q, &fx), &fy) in dst.chunks_exact_mut(C).zip(&fxs).zip(&fys) {
-        let (fx, fy) = (fx as i64, fy as i64);
-        let (ax, ay) = ((fx & 31) as u32, (fy & 31) as u32);
-        let (x0, y0) = (fx >> 5, fy >> 5);
-        let (ra, rb) = (row_at(y0), row_at(y0 + 1));
+    let data = &win.data[..];
+    let stride = win.stride;
+    for (q, &(at, ax, ay)) in dst.chunks_exact_mut(C).zip(&taps) {
+        let at = at as usize;
         let weights = [
             (32 - ax) * (32 - ay),
             ax * (32 - ay),
             (32 - ax) * ay,
             ax * ay,
         ];
-        let (xa, xb) = if x0 >= 0 && x0 + 1 < w as i64 {
-            (x0 as usize * C, x0 as usize * C + C)
-        } else {
-            (reflect101(x0, w) * C, reflect101(x0 + 1, w) * C)
-        };
-        let (pa, pb) = (&ra[xa..xa + C], &ra[xb..xb + C]);
-        let (pc, pd) = (&rb[xa..xa + C], &rb[xb..xb + C]);
+        let px = |i: usize| -> &[u8; C] { data[i..i + C].try_into().expect("one pixel") };
+        let (pa, pb, pc, pd) = (px(at), px(at + C), px(at + stride), px(at + stride + C));
         for ch in 0..C {
             let v = pa[ch] as u32 * weights[0]
                 + pb[ch] as u32 * weights[1]
@@ -146,6 +185,9 @@ impl CameraPerturbation for Elastic {
             .for_each(|chunk| {
                 let y0 = chunk[0].0;
                 let lo = y0 as i64 - r as i64;
+                // The displacements are at most alpha (smoothed draws of U(-alpha, alpha)).
+                let span = self.alpha.ceil() as usize + 2;
+                let win = Window::new(input, y0 as i64 - span as i64, chunk.len() + 2 * span, span);
                 let mut ring = [vec![0f32; k * w], vec![0f32; k * w]];
                 let (mut raw, mut padded) = (vec![0f32; w], Vec::new());
                 let slot = |i: usize| (i % k) * w..(i % k + 1) * w;
@@ -176,10 +218,11 @@ impl CameraPerturbation for Elastic {
                             }
                         }
                     }
+                    let fields = (&columns[..], &d[0][..], &d[1][..]);
                     match c {
-                        1 => remap_row::<1>(input, y, (&columns, &d[0], &d[1], self.alpha), dst),
-                        3 => remap_row::<3>(input, y, (&columns, &d[0], &d[1], self.alpha), dst),
-                        _ => remap_row::<4>(input, y, (&columns, &d[0], &d[1], self.alpha), dst),
+                        1 => remap_row::<1>(&win, y, fields, dst),
+                        3 => remap_row::<3>(&win, y, fields, dst),
+                        _ => remap_row::<4>(&win, y, fields, dst),
                     }
                     copy_alpha(format, input.row(y), dst);
                 }
