@@ -1,6 +1,7 @@
 //! Properties every implemented camera perturbation must have, at every severity: determinism,
 //! geometry and format preserved, alpha untouched, stride independence, thread-count independence,
-//! tiny images, and a visible change on a real street frame.
+//! tiny images, a visible change on a real street frame, and a distortion that moves with severity
+//! as the reference's does.
 
 mod common;
 
@@ -163,5 +164,62 @@ fn changes_a_real_frame_at_every_severity() {
                 e.id
             );
         }
+    }
+}
+
+/// How the distortion of the frame (mean absolute difference from the clean frame) must move with
+/// severity; everything not listed rises at every step.
+fn severity_trend(id: &str) -> Trend {
+    match id {
+        // The reference's (alpha, sigma) pairs make the displacement spread alpha x (the
+        // Gaussian's noise gain) about 0.98, 0.66, 0.90, 0.95, 1.08 px: s1 jitters more than s2.
+        "C-D1" => Trend::RisesFrom(2),
+        // Nearest-neighbour enlargement at f = 0.85 repeats every seventh row and column and
+        // shifts the pixels between by one, which costs more on a textured street than the
+        // coarser blocks of s2.
+        "C-D2" => Trend::RisesFrom(2),
+        // Higher hysteresis thresholds keep fewer edges (the paper's inverted trend).
+        "C-E4" => Trend::Falls,
+        // Each severity is a different colour mapping (channel rotations, swaps, inversion,
+        // pairwise averages): there is no order to check.
+        "C-F1" => Trend::Unordered,
+        _ => Trend::RisesFrom(1),
+    }
+}
+
+enum Trend {
+    /// Rises at every step from this severity on.
+    RisesFrom(usize),
+    /// Falls (or stays) at every step.
+    Falls,
+    Unordered,
+}
+
+#[test]
+fn distortion_moves_with_severity_on_a_real_frame() {
+    let Some(frame) = common::kitti_image("distortion_moves_with_severity_on_a_real_frame", 0)
+    else {
+        return;
+    };
+    let frame = resize_bilinear(&frame.view(), 612, 185);
+    for e in implemented() {
+        // Four frames far apart in the sequence, so that the animated effects (drops, flakes,
+        // bolts) are four independent draws rather than four positions of the same ones.
+        let d: Vec<f64> = e
+            .severities()
+            .map(|s| {
+                let mut p = CameraPerturber::new(e.id, s, 77).unwrap();
+                (0..4u64)
+                    .map(|k| mean_abs_diff(&frame, &run(&mut p, &frame.view(), k * 997).unwrap()))
+                    .sum::<f64>()
+                    / 4.0
+            })
+            .collect();
+        let ok = match severity_trend(e.id) {
+            Trend::RisesFrom(s) => d[s - 1..].windows(2).all(|w| w[1] > w[0]),
+            Trend::Falls => d.windows(2).all(|w| w[1] <= w[0]) && d[4] < d[0],
+            Trend::Unordered => true,
+        };
+        assert!(ok, "{} ({}): distortion by severity {d:.3?}", e.id, e.name);
     }
 }
