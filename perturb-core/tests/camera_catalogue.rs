@@ -223,3 +223,44 @@ fn distortion_moves_with_severity_on_a_real_frame() {
         assert!(ok, "{} ({}): distortion by severity {d:.3?}", e.id, e.name);
     }
 }
+
+#[test]
+fn wide_and_baseline_code_give_the_same_bytes() {
+    use perturb_core::camera::ops::{force_baseline, wide_available};
+    if !wide_available() {
+        eprintln!("this CPU has no AVX2 + FMA: only the baseline code runs, nothing to compare");
+        return;
+    }
+    // Odd sizes (vector loops with remainders) in every format; the real frame when present.
+    let mut inputs: Vec<Image> = [PixelFormat::Rgb8, PixelFormat::Bgra8, PixelFormat::Mono8]
+        .into_iter()
+        .map(|f| synthetic(203, 61, f))
+        .collect();
+    if let Some(frame) = common::kitti_image("wide_and_baseline_code_give_the_same_bytes", 0) {
+        inputs.push(resize_bilinear(&frame.view(), 401, 121));
+    }
+    for e in implemented() {
+        for input in &inputs {
+            for s in e.severities() {
+                // Formats a perturbation refuses (mono for the colour family) give the same
+                // error on both paths.
+                let [base, wide] = [true, false].map(|baseline| {
+                    force_baseline(baseline);
+                    let mut p = CameraPerturber::new(e.id, s, 5).map_err(|e| e.to_string())?;
+                    run(&mut p, &input.view(), 3)
+                        .map(|i| i.data)
+                        .map_err(|e| e.to_string())
+                });
+                force_baseline(false);
+                assert!(base.is_ok() || input.format.is_mono(), "{} s{s}", e.id);
+                assert_eq!(
+                    base,
+                    wide,
+                    "{} s{s} {:?}: the AVX2 code gives other bytes",
+                    e.id,
+                    input.format
+                );
+            }
+        }
+    }
+}

@@ -2,6 +2,7 @@
 
 use super::ops::{
     GaussianRows, byte, copy_alpha, gaussian_blur, map_value, par_rows, reflect101, row_rng,
+    wide_fn,
 };
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{Image, ImageView, ImageViewMut, PixelFormat};
@@ -392,15 +393,24 @@ impl ZoomTaps {
             }
             return;
         }
-        for &(j0, j1, off) in &self.runs {
+        zoom_runs(&self.runs, &self.weights, vrow, c, acc);
+    }
+}
+
+wide_fn! {
+    /// [`ZoomTaps::add`] in runs of constant source offset.
+    fn zoom_runs(
+        runs: &[(usize, usize, isize)],
+        weights: &[i32],
+        vrow: &[u16],
+        c: usize,
+        acc: &mut [u32],
+    ) {
+        for &(j0, j1, off) in runs {
             let base = (j0 as isize + off) as usize;
             let n = j1 - j0;
             let (a, b) = (&vrow[base..base + n], &vrow[base + c..base + c + n]);
-            for (((o, &a), &b), &wx) in acc[j0..j1]
-                .iter_mut()
-                .zip(a)
-                .zip(b)
-                .zip(&self.weights[j0..j1])
+            for (((o, &a), &b), &wx) in acc[j0..j1].iter_mut().zip(a).zip(b).zip(&weights[j0..j1])
             {
                 let (a, b) = (a as i32, b as i32);
                 *o = o.wrapping_add(((a << 8) + (b - a) * wx) as u32);
@@ -409,17 +419,34 @@ impl ZoomTaps {
     }
 }
 
-/// [`ZoomTaps::add`] pixel by pixel, `C` samples each.
-fn zoom_pixels<const C: usize>(vrow: &[u16], xm: &[(u32, i32)], acc: &mut [u32]) {
-    for (out, &(i, wx)) in acc.chunks_exact_mut(C).zip(xm) {
-        let two = &vrow[i as usize..i as usize + 2 * C];
-        let (p, q): (&[u16; C], &[u16; C]) = (
-            two[..C].try_into().expect("C"),
-            two[C..].try_into().expect("C"),
-        );
-        for (ch, o) in out.iter_mut().enumerate() {
-            let (a, b) = (p[ch] as i32, q[ch] as i32);
-            *o = o.wrapping_add(((a << 8) + (b - a) * wx) as u32);
+wide_fn! {
+    /// [`ZoomTaps::add`] pixel by pixel, `C` samples each.
+    fn zoom_pixels<const C: usize>(vrow: &[u16], xm: &[(u32, i32)], acc: &mut [u32]) {
+        for (out, &(i, wx)) in acc.chunks_exact_mut(C).zip(xm) {
+            let two = &vrow[i as usize..i as usize + 2 * C];
+            let (p, q): (&[u16; C], &[u16; C]) = (
+                two[..C].try_into().expect("C"),
+                two[C..].try_into().expect("C"),
+            );
+            for (ch, o) in out.iter_mut().enumerate() {
+                let (a, b) = (p[ch] as i32, q[ch] as i32);
+                *o = o.wrapping_add(((a << 8) + (b - a) * wx) as u32);
+            }
+        }
+    }
+}
+
+wide_fn! {
+    /// The vertical blend of two source rows for one zoom factor: `a (256 - wy) + b wy` (8.8).
+    fn zoom_vertical(r0: &[u8], r1: &[u8], wy: u16, vrow: &mut [u16]) {
+        if wy == 0 {
+            for (v, a) in vrow.iter_mut().zip(r0) {
+                *v = (*a as u16) << 8;
+            }
+        } else {
+            for ((v, a), b) in vrow.iter_mut().zip(r0).zip(r1) {
+                *v = *a as u16 * (256 - wy) + *b as u16 * wy;
+            }
         }
     }
 }
@@ -462,15 +489,7 @@ impl CameraPerturbation for ZoomBlur {
                     &input.row(y0)[lo * c..hi * c],
                     &input.row(y1)[lo * c..hi * c],
                 );
-                if wy == 0 {
-                    for (v, a) in vrow.iter_mut().zip(r0) {
-                        *v = (*a as u16) << 8;
-                    }
-                } else {
-                    for ((v, a), b) in vrow.iter_mut().zip(r0).zip(r1) {
-                        *v = *a as u16 * (256 - wy) + *b as u16 * wy;
-                    }
-                }
+                zoom_vertical(r0, r1, wy, &mut vrow);
                 xm.add(&vrow, c, &mut acc);
             }
             // round(acc / (n 2^16)) = floor(t / n) with t = (acc + n 2^15) >> 16 below 2^12,

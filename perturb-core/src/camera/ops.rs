@@ -20,6 +20,65 @@ where
         .for_each(|(y, out)| f(y, input.row(y), out));
 }
 
+/// Whether the functions defined with [`wide_fn!`] run their AVX2 + FMA copy: on x86-64 CPUs
+/// that have both, unless [`force_baseline`] is on. The check is two cached loads.
+#[inline]
+pub fn wide_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        !BASELINE_ONLY.load(std::sync::atomic::Ordering::Relaxed)
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// When set, [`wide_available`] is false.
+static BASELINE_ONLY: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Makes the [`wide_fn!`] functions run their baseline copy only (`true`) or the widest the CPU
+/// has (`false`, the default), on every thread: for tests and benchmarks that compare the two.
+pub fn force_baseline(on: bool) {
+    BASELINE_ONLY.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Defines a function whose body is compiled twice, for the build's baseline target and for
+/// AVX2 + FMA, and runs the copy this CPU can run ([`wide_available`]). The inner loops of the
+/// AVX2 copy work on eight floats or 32-bit integers at a time instead of four (the build's
+/// baseline, `x86-64-v2`, has 128-bit vectors only). Both copies compute the same values: Rust
+/// never fuses a multiply and an add by itself or reorders float arithmetic, so wider
+/// instructions change only how many lanes run at once; a test compares the two paths on every
+/// camera perturbation. For kernels that run per row or per band (the check costs two loads);
+/// functions the body calls get the wider code only where they are inlined into it. Const
+/// generic parameters are supported, type parameters are not.
+macro_rules! wide_fn {
+    (
+        $(#[$meta:meta])*
+        $vis:vis fn $name:ident $(<$(const $cg:ident: $ct:ty),+>)?
+            ($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block
+    ) => {
+        $(#[$meta])*
+        $vis fn $name $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2,fma")]
+            fn wide $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? $body
+            #[inline(always)]
+            fn base $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? $body
+            #[cfg(target_arch = "x86_64")]
+            if $crate::camera::ops::wide_available() {
+                // SAFETY: the CPU has AVX2 and FMA (`wide_available` checked), which is all a
+                // function compiled for them needs.
+                return unsafe { wide $(::<$($cg),+>)? ($($arg),*) };
+            }
+            base $(::<$($cg),+>)? ($($arg),*)
+        }
+    };
+}
+pub(crate) use wide_fn;
+
 /// A random stream for row `y` of frame `seq`: independent per row, so rows can run in any order
 /// on any thread and give the same bytes.
 #[inline]
