@@ -254,11 +254,9 @@ fn wide_and_baseline_code_give_the_same_bytes() {
                 force_baseline(false);
                 assert!(base.is_ok() || input.format.is_mono(), "{} s{s}", e.id);
                 assert_eq!(
-                    base,
-                    wide,
+                    base, wide,
                     "{} s{s} {:?}: the AVX2 code gives other bytes",
-                    e.id,
-                    input.format
+                    e.id, input.format
                 );
             }
         }

@@ -2,6 +2,7 @@
 
 use super::ops::{
     copy_alpha, fill_quarters, gaussian_kernel, pad_row_copy, par_rows, reflect101, row_rng,
+    wide_fn,
 };
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut};
@@ -49,59 +50,60 @@ impl Window {
     }
 }
 
-/// One output row of `cv2.remap` with bilinear interpolation in OpenCV's fixed point: each source
-/// coordinate is rounded to 1/32 pixel (`INTER_BITS` = 5) and the four weights are products of
-/// those fractions (exact in 1/1024), rounded once; borders reflect (reflect-101, through the
-/// window's margins). Pixel `x` of row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel,
-/// all interpolated. `columns` holds x as f32 for each x; the displacements must stay within the
-/// window's margin less one pixel (they are clamped to it, so a larger one cannot read outside).
-fn remap_row<const C: usize>(
-    win: &Window,
-    y: usize,
-    (columns, dx, dy): (&[f32], &[f32], &[f32]),
-    dst: &mut [u8],
-) {
-    // Source coordinates in 1/32 pixel, rounded half to even, in vectorisable passes: adding
-    // 1.5 2^23 leaves the rounded integer in the low mantissa bits (exact for |v| < 2^22).
-    let round = |v: f32| ((v + 12_582_912.0).to_bits() as i32).wrapping_sub(0x4B40_0000);
-    let w = columns.len() as i32;
-    let pad = win.pad as i32;
-    let (rows, stride) = ((win.data.len() / win.stride) as i32, win.stride as i32);
-    let (yf, top) = (y as f32, win.top as i32);
-    // Per pixel: the window offset of its top-left tap and the two fractions.
-    let taps: Vec<(u32, u32, u32)> = dx
-        .iter()
-        .zip(columns)
-        .zip(dy)
-        .map(|((&ox, &x), &oy)| {
+wide_fn! {
+    /// One output row of `cv2.remap` with bilinear interpolation in OpenCV's fixed point: each source
+    /// coordinate is rounded to 1/32 pixel (`INTER_BITS` = 5) and the four weights are products of
+    /// those fractions (exact in 1/1024), rounded once; borders reflect (reflect-101, through the
+    /// window's margins). Pixel `x` of row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel,
+    /// all interpolated. `columns` holds x as f32 for each x; the displacements must stay within the
+    /// window's margin less one pixel (they are clamped to it, so a larger one cannot read outside).
+    fn remap_row<const C: usize>(
+        win: &Window,
+        y: usize,
+        fields: (&[f32], &[f32], &[f32]),
+        dst: &mut [u8],
+    ) {
+        let (columns, dx, dy) = fields;
+        // Source coordinates in 1/32 pixel, rounded half to even, in vectorisable passes: adding
+        // 1.5 2^23 leaves the rounded integer in the low mantissa bits (exact for |v| < 2^22).
+        let round = |v: f32| ((v + 12_582_912.0).to_bits() as i32).wrapping_sub(0x4B40_0000);
+        let w = columns.len() as i32;
+        let pad = win.pad as i32;
+        let (rows, stride) = ((win.data.len() / win.stride) as i32, win.stride as i32);
+        let (yf, top) = (y as f32, win.top as i32);
+        // Per pixel: the window offset of its top-left tap and the two fractions.
+        // A plain loop, not `collect`: a closure inside a `wide_fn!` body is compiled for AVX2,
+        // and the library's collecting code (compiled for the baseline) cannot inline it.
+        let mut taps = vec![(0u32, 0u32, 0u32); columns.len()];
+        for (t, ((&ox, &x), &oy)) in taps.iter_mut().zip(dx.iter().zip(columns).zip(dy)) {
             let (fx, fy) = (round((x + ox) * 32.0), round((yf + oy) * 32.0));
             let wx = (pad + (fx >> 5)).clamp(0, w + 2 * pad - 2);
             let wy = ((fy >> 5) - top).clamp(0, rows - 2);
-            (
+            *t = (
                 (wy * stride + wx * C as i32) as u32,
                 (fx & 31) as u32,
                 (fy & 31) as u32,
-            )
-        })
-        .collect();
-    let data = &win.data[..];
-    let stride = win.stride;
-    for (q, &(at, ax, ay)) in dst.chunks_exact_mut(C).zip(&taps) {
-        let at = at as usize;
-        let weights = [
-            (32 - ax) * (32 - ay),
-            ax * (32 - ay),
-            (32 - ax) * ay,
-            ax * ay,
-        ];
-        let px = |i: usize| -> &[u8; C] { data[i..i + C].try_into().expect("one pixel") };
-        let (pa, pb, pc, pd) = (px(at), px(at + C), px(at + stride), px(at + stride + C));
-        for ch in 0..C {
-            let v = pa[ch] as u32 * weights[0]
-                + pb[ch] as u32 * weights[1]
-                + pc[ch] as u32 * weights[2]
-                + pd[ch] as u32 * weights[3];
-            q[ch] = ((v + 512) >> 10) as u8;
+            );
+        }
+        let data = &win.data[..];
+        let stride = win.stride;
+        for (q, &(at, ax, ay)) in dst.chunks_exact_mut(C).zip(&taps) {
+            let at = at as usize;
+            let weights = [
+                (32 - ax) * (32 - ay),
+                ax * (32 - ay),
+                (32 - ax) * ay,
+                ax * ay,
+            ];
+            let px = |i: usize| -> &[u8; C] { data[i..i + C].try_into().expect("one pixel") };
+            let (pa, pb, pc, pd) = (px(at), px(at + C), px(at + stride), px(at + stride + C));
+            for ch in 0..C {
+                let v = pa[ch] as u32 * weights[0]
+                    + pb[ch] as u32 * weights[1]
+                    + pc[ch] as u32 * weights[2]
+                    + pd[ch] as u32 * weights[3];
+                q[ch] = ((v + 512) >> 10) as u8;
+            }
         }
     }
 }
@@ -150,17 +152,7 @@ impl Elastic {
         let (w, r) = (raw.len(), self.kernel.len() / 2);
         padded.resize(w + 2 * r, 0.0);
         pad_row_copy(raw, 1, r, padded);
-        // The kernel is symmetric: taps t and 2r - t share one multiply.
-        let kc = self.kernel[r];
-        for (o, s) in out.iter_mut().zip(&padded[r..r + w]) {
-            *o = kc * s;
-        }
-        for (t, k) in self.kernel[..r].iter().enumerate() {
-            let (a, b) = (&padded[t..t + w], &padded[2 * r - t..2 * r - t + w]);
-            for ((o, s), u) in out.iter_mut().zip(a).zip(b) {
-                *o += k * (s + u);
-            }
-        }
+        smooth_padded(&self.kernel, padded, out);
     }
 }
 
@@ -207,16 +199,7 @@ impl CameraPerturbation for Elastic {
                     fill(i0 + k - 1, &mut ring);
                     // Vertical smoothing, symmetric taps paired.
                     for (out, field) in d.iter_mut().zip(&ring) {
-                        let kc = self.kernel[r];
-                        for (o, s) in out.iter_mut().zip(&field[slot(i0 + r)]) {
-                            *o = kc * s;
-                        }
-                        for (t, kw) in self.kernel[..r].iter().enumerate() {
-                            let (a, b) = (&field[slot(i0 + t)], &field[slot(i0 + 2 * r - t)]);
-                            for ((o, s), u) in out.iter_mut().zip(a).zip(b) {
-                                *o += kw * (s + u);
-                            }
-                        }
+                        smooth_ring(&self.kernel, field, i0, out);
                     }
                     let fields = (&columns[..], &d[0][..], &d[1][..]);
                     match c {
@@ -227,6 +210,44 @@ impl CameraPerturbation for Elastic {
                     copy_alpha(format, input.row(y), dst);
                 }
             });
+    }
+}
+
+wide_fn! {
+    /// `out[x] = sum_t kernel[t] padded[x + t]` for a symmetric kernel of length 2r + 1 (taps t
+    /// and 2r - t share one multiply); `padded` is `out.len() + 2r` long.
+    fn smooth_padded(kernel: &[f32], padded: &[f32], out: &mut [f32]) {
+        let (w, r) = (out.len(), kernel.len() / 2);
+        let kc = kernel[r];
+        for (o, s) in out.iter_mut().zip(&padded[r..r + w]) {
+            *o = kc * s;
+        }
+        for (t, k) in kernel[..r].iter().enumerate() {
+            let (a, b) = (&padded[t..t + w], &padded[2 * r - t..2 * r - t + w]);
+            for ((o, s), u) in out.iter_mut().zip(a).zip(b) {
+                *o += k * (s + u);
+            }
+        }
+    }
+}
+
+wide_fn! {
+    /// The vertical smoothing of one output row from a ring of `kernel.len()` smoothed rows of
+    /// `out.len()` samples, the row `i0 + t` in slot `(i0 + t) % k` (symmetric taps paired).
+    fn smooth_ring(kernel: &[f32], ring: &[f32], i0: usize, out: &mut [f32]) {
+        let (w, k) = (out.len(), kernel.len());
+        let r = k / 2;
+        let slot = |i: usize| &ring[(i % k) * w..(i % k + 1) * w];
+        let kc = kernel[r];
+        for (o, s) in out.iter_mut().zip(slot(i0 + r)) {
+            *o = kc * s;
+        }
+        for (t, kw) in kernel[..r].iter().enumerate() {
+            let (a, b) = (slot(i0 + t), slot(i0 + 2 * r - t));
+            for ((o, s), u) in out.iter_mut().zip(a).zip(b) {
+                *o += kw * (s + u);
+            }
+        }
     }
 }
 

@@ -20,7 +20,7 @@ where
         .for_each(|(y, out)| f(y, input.row(y), out));
 }
 
-/// Whether the functions defined with [`wide_fn!`] run their AVX2 + FMA copy: on x86-64 CPUs
+/// Whether the functions defined with `wide_fn!` run their AVX2 + FMA copy: on x86-64 CPUs
 /// that have both, unless [`force_baseline`] is on. The check is two cached loads.
 #[inline]
 pub fn wide_available() -> bool {
@@ -39,7 +39,7 @@ pub fn wide_available() -> bool {
 /// When set, [`wide_available`] is false.
 static BASELINE_ONLY: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
-/// Makes the [`wide_fn!`] functions run their baseline copy only (`true`) or the widest the CPU
+/// Makes the `wide_fn!` functions run their baseline copy only (`true`) or the widest the CPU
 /// has (`false`, the default), on every thread: for tests and benchmarks that compare the two.
 pub fn force_baseline(on: bool) {
     BASELINE_ONLY.store(on, std::sync::atomic::Ordering::Relaxed);
@@ -52,8 +52,11 @@ pub fn force_baseline(on: bool) {
 /// never fuses a multiply and an add by itself or reorders float arithmetic, so wider
 /// instructions change only how many lanes run at once; a test compares the two paths on every
 /// camera perturbation. For kernels that run per row or per band (the check costs two loads);
-/// functions the body calls get the wider code only where they are inlined into it. Const
-/// generic parameters are supported, type parameters are not.
+/// functions the body calls get the wider code only where they are inlined into it. Closures
+/// in the body are compiled for AVX2 too, so library code that calls them without being inlined
+/// (`collect`, `for_each` on long adapter chains) cannot inline them back and calls them once per
+/// element: write such loops as `for` loops over slices. Const generic parameters are
+/// supported, type parameters are not.
 macro_rules! wide_fn {
     (
         $(#[$meta:meta])*
