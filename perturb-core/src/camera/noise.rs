@@ -8,7 +8,7 @@
 #[cfg(test)]
 use super::CameraSetup;
 use super::ops::{
-    byte, copy_alpha, frame_buffer, merge_rgb, par_rows, recycle, row_rng, split_rgb,
+    byte, copy_alpha, frame_buffer, merge_rgb, par_rows, recycle, row_rng, split_rgb, wide_fn,
 };
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
@@ -443,104 +443,128 @@ impl JpegCompression {
         // The tables transposed, as the coefficients come out of the forward pass.
         let q_t: Block = std::array::from_fn(|v| std::array::from_fn(|u| q[u * 8 + v]));
         let qinv_t = q_t.map(|row| row.map(|v| 1.0 / v));
-        p.data.par_chunks_mut(pw * 8).for_each(|band| {
-            for bx in 0..pw / 8 {
-                let mut blk = [[0f32; 8]; 8];
-                for (y, row) in blk.iter_mut().enumerate() {
-                    for (x, v) in row.iter_mut().enumerate() {
-                        *v = band[y * pw + bx * 8 + x] - 128.0;
-                    }
-                }
-                // Forward: the coefficients C = M B M^T come out transposed, C^T = M (M B)^T,
-                // which saves two transposes; they are quantised and dequantised as C^T.
-                let mut ct = dct8(m, &transpose8(&dct8(m, &blk)));
-                for (row, (qi, qr)) in ct.iter_mut().zip(qinv_t.iter().zip(&q_t)) {
-                    for ((coef, qi), q) in row.iter_mut().zip(qi).zip(qr) {
-                        *coef = round_f32(*coef * qi) * q;
-                    }
-                }
-                // Inverse: B = M^T C M = M^T (M^T C^T)^T.
-                let b = idct8(m, &transpose8(&idct8(m, &ct)));
-                for (y, row) in b.iter().enumerate() {
-                    for (x, v) in row.iter().enumerate() {
-                        band[y * pw + bx * 8 + x] = (v + 128.0).clamp(0.0, 255.0);
-                    }
+        p.data
+            .par_chunks_mut(pw * 8)
+            .for_each(|band| roundtrip_band(m, &q_t, &qinv_t, pw, band));
+    }
+}
+
+wide_fn! {
+    /// DCT, quantise, dequantise, inverse DCT of every 8x8 block of a band of 8 rows of `pw`
+    /// samples (level-shifted by 128), in place; `q_t` and `qinv_t` are the quantisation table
+    /// and its reciprocals, transposed.
+    fn roundtrip_band(m: &Block, q_t: &Block, qinv_t: &Block, pw: usize, band: &mut [f32]) {
+        for bx in 0..pw / 8 {
+            let mut blk = [[0f32; 8]; 8];
+            for (y, row) in blk.iter_mut().enumerate() {
+                for (x, v) in row.iter_mut().enumerate() {
+                    *v = band[y * pw + bx * 8 + x] - 128.0;
                 }
             }
-        });
+            // Forward: the coefficients C = M B M^T come out transposed, C^T = M (M B)^T,
+            // which saves two transposes; they are quantised and dequantised as C^T.
+            let mut ct = dct8(m, &transpose8(&dct8(m, &blk)));
+            for (row, (qi, qr)) in ct.iter_mut().zip(qinv_t.iter().zip(q_t)) {
+                for ((coef, qi), q) in row.iter_mut().zip(qi).zip(qr) {
+                    *coef = round_f32(*coef * qi) * q;
+                }
+            }
+            // Inverse: B = M^T C M = M^T (M^T C^T)^T.
+            let b = idct8(m, &transpose8(&idct8(m, &ct)));
+            for (y, row) in b.iter().enumerate() {
+                for (x, v) in row.iter().enumerate() {
+                    band[y * pw + bx * 8 + x] = (v + 128.0).clamp(0.0, 255.0);
+                }
+            }
+        }
     }
 }
 
-/// JFIF RGB to YCbCr of one row of `c`-byte pixels: luma into `y`, chroma added into the
-/// half-width `cb`, `cr` (left pixel of each pair first). `work` (4 `y.len()` floats) holds the
-/// row deinterleaved, so that the arithmetic runs on contiguous arrays.
-#[inline]
-fn to_ycc(
-    src: &[u8],
-    format: PixelFormat,
-    work: &mut [f32],
-    y: &mut [f32],
-    cb: &mut [f32],
-    cr: &mut [f32],
-) {
-    let w = y.len();
-    let (r, rest) = work.split_at_mut(w);
-    let (g, rest) = rest.split_at_mut(w);
-    let (b, t) = rest.split_at_mut(w);
-    split_rgb(src, format, [&mut *r, &mut *g, &mut *b]);
-    let rgb = || r.iter().zip(g.iter()).zip(b.iter());
-    for (yv, ((&r, &g), &b)) in y.iter_mut().zip(rgb()) {
-        *yv = 0.299 * r + 0.587 * g + 0.114 * b;
-    }
-    let pair_sums = |t: &[f32], out: &mut [f32]| {
-        for (o, pair) in out.iter_mut().zip(t.chunks(2)) {
-            *o = match pair {
-                [a, b] => (*o + a) + b,
-                [a] => *o + a,
-                _ => *o,
-            };
+wide_fn! {
+    /// JFIF RGB to YCbCr of one row of `c`-byte pixels: luma into `y`, chroma added into the
+    /// half-width `cb`, `cr` (left pixel of each pair first). `work` (4 `y.len()` floats) holds the
+    /// row deinterleaved, so that the arithmetic runs on contiguous arrays.
+    fn to_ycc(
+        src: &[u8],
+        format: PixelFormat,
+        work: &mut [f32],
+        y: &mut [f32],
+        cb: &mut [f32],
+        cr: &mut [f32],
+    ) {
+        let w = y.len();
+        let (r, rest) = work.split_at_mut(w);
+        let (g, rest) = rest.split_at_mut(w);
+        let (b, t) = rest.split_at_mut(w);
+        split_rgb(src, format, [&mut *r, &mut *g, &mut *b]);
+        let rgb = || r.iter().zip(g.iter()).zip(b.iter());
+        for (yv, ((&r, &g), &b)) in y.iter_mut().zip(rgb()) {
+            *yv = 0.299 * r + 0.587 * g + 0.114 * b;
         }
-    };
-    for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
-        *tv = -0.168_736 * r - 0.331_264 * g + 0.5 * b;
+        let pair_sums = |t: &[f32], out: &mut [f32]| {
+            for (o, pair) in out.iter_mut().zip(t.chunks(2)) {
+                *o = match pair {
+                    [a, b] => (*o + a) + b,
+                    [a] => *o + a,
+                    _ => *o,
+                };
+            }
+        };
+        for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
+            *tv = -0.168_736 * r - 0.331_264 * g + 0.5 * b;
+        }
+        pair_sums(t, cb);
+        for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
+            *tv = 0.5 * r - 0.418_688 * g - 0.081_312 * b;
+        }
+        pair_sums(t, cr);
     }
-    pair_sums(t, cb);
-    for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
-        *tv = 0.5 * r - 0.418_688 * g - 0.081_312 * b;
-    }
-    pair_sums(t, cr);
 }
 
-/// libjpeg's "fancy" horizontal upsampling of one chroma row `t` (already weighted 3:1
-/// vertically) to `out`: sample `2i` weighs `t[i]` 3/4 and `t[i - 1]` 1/4, sample `2i + 1` weighs
-/// `t[i]` 3/4 and `t[i + 1]` 1/4 (edges replicated); the result is scaled by 1/16 and the 128
-/// offset removed.
-#[inline]
-fn upsample_row(t: &[f32], out: &mut [f32]) {
-    let n = t.len();
-    let f = |c: f32, side: f32| (3.0 * c + side) * (1.0 / 16.0) - 128.0;
-    // The edge samples (which replicate their neighbour) first, then the interior without
-    // index clamps (it vectorises).
-    let edge = |i: usize, pair: &mut [f32]| {
-        let c = t[i];
-        pair[0] = f(c, t[i.saturating_sub(1)]);
-        if let Some(odd) = pair.get_mut(1) {
-            *odd = f(c, t[(i + 1).min(n - 1)]);
+wide_fn! {
+    /// libjpeg's "fancy" horizontal upsampling of one chroma row `t` (already weighted 3:1
+    /// vertically) to `out`: sample `2i` weighs `t[i]` 3/4 and `t[i - 1]` 1/4, sample `2i + 1` weighs
+    /// `t[i]` 3/4 and `t[i + 1]` 1/4 (edges replicated); the result is scaled by 1/16 and the 128
+    /// offset removed.
+    fn upsample_row(t: &[f32], out: &mut [f32]) {
+        let n = t.len();
+        let f = |c: f32, side: f32| (3.0 * c + side) * (1.0 / 16.0) - 128.0;
+        // The edge samples (which replicate their neighbour) first, then the interior without
+        // index clamps (it vectorises).
+        let edge = |i: usize, pair: &mut [f32]| {
+            let c = t[i];
+            pair[0] = f(c, t[i.saturating_sub(1)]);
+            if let Some(odd) = pair.get_mut(1) {
+                *odd = f(c, t[(i + 1).min(n - 1)]);
+            }
+        };
+        let mut pairs = out.chunks_mut(2);
+        for (i, pair) in pairs.by_ref().take(1).enumerate() {
+            edge(i, pair);
         }
-    };
-    let mut pairs = out.chunks_mut(2);
-    for (i, pair) in pairs.by_ref().take(1).enumerate() {
-        edge(i, pair);
-    }
-    if n > 2 {
-        for (pair, win) in pairs.by_ref().take(n - 2).zip(t.windows(3)) {
-            pair[0] = f(win[1], win[0]);
-            pair[1] = f(win[1], win[2]);
+        if n > 2 {
+            for (pair, win) in pairs.by_ref().take(n - 2).zip(t.windows(3)) {
+                pair[0] = f(win[1], win[0]);
+                pair[1] = f(win[1], win[2]);
+            }
+        }
+        let done = if n > 2 { n - 1 } else { 1 };
+        for (i, pair) in pairs.enumerate() {
+            edge(done + i, pair);
         }
     }
-    let done = if n > 2 { n - 1 } else { 1 };
-    for (i, pair) in pairs.enumerate() {
-        edge(done + i, pair);
+}
+
+wide_fn! {
+    /// JFIF YCbCr (chroma already without its 128 offset) to RGB bytes, one plane each.
+    fn ycc_to_rgb(y: &[f32], u: &[f32], v: &[f32], r: &mut [u8], g: &mut [u8], b: &mut [u8]) {
+        let yuv = y.iter().zip(u).zip(v);
+        for (((((&y, &u), &v), pr), pg), pb) in yuv.zip(r).zip(g).zip(b) {
+            let yy = y + 0.5;
+            *pr = byte(yy + 1.402 * v);
+            *pg = byte(yy - 0.344_136 * u - 0.714_136 * v);
+            *pb = byte(yy + 1.772 * u);
+        }
     }
 }
 
@@ -638,15 +662,7 @@ impl CameraPerturbation for JpegCompression {
                     let yrow = &yp.data[r * ypw..][..w];
                     let (p0, rest) = planes.split_at_mut(w);
                     let (p1, p2) = rest.split_at_mut(w);
-                    let yuv = yrow.iter().zip(u.iter()).zip(v.iter());
-                    for (((((&y, &u), &v), pr), pg), pb) in
-                        yuv.zip(p0.iter_mut()).zip(p1.iter_mut()).zip(p2.iter_mut())
-                    {
-                        let yy = y + 0.5;
-                        *pr = byte(yy + 1.402 * v);
-                        *pg = byte(yy - 0.344_136 * u - 0.714_136 * v);
-                        *pb = byte(yy + 1.772 * u);
-                    }
+                    ycc_to_rgb(yrow, u, v, p0, p1, p2);
                     merge_rgb(f, [&*p0, &*p1, &*p2], dst);
                     copy_alpha(f, input.row(r), dst);
                 },
