@@ -265,13 +265,7 @@ pub fn separable_filter(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, ke
         // Pad the row once, then a sum of shifted copies (one vector op per tap).
         let mut padded = vec![0f32; (w + 2 * r) * c];
         pad_row(src, c, r, &mut padded, |v| v as f32);
-        dst.fill(0.0);
-        for (t, &kw) in kernel.iter().enumerate() {
-            let shifted = &padded[t * c..t * c + row_len];
-            for (d, s) in dst.iter_mut().zip(shifted) {
-                *d += kw * s;
-            }
-        }
+        shifted_sum(kernel, &padded, c, dst);
     };
     let rows = output.rows_mut();
     let band = 16usize;
@@ -293,19 +287,27 @@ pub fn separable_filter(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, ke
             }
             let mut acc = vec![0f32; row_len];
             for (y, out) in chunk {
-                acc.fill(0.0);
-                for (t, &kw) in kernel.iter().enumerate() {
-                    let base = (y - y0 + t) * row_len;
-                    for (a, s) in acc.iter_mut().zip(&hrows[base..base + row_len]) {
-                        *a += kw * s;
-                    }
-                }
-                for (o, a) in out.iter_mut().zip(&acc) {
-                    *o = byte(a + 0.5);
-                }
+                let rows = &hrows[(y - y0) * row_len..(y - y0 + kernel.len()) * row_len];
+                shifted_sum(kernel, rows, row_len, &mut acc);
+                round_u8(&acc, out);
                 copy_alpha(format, input.row(y), out);
             }
         });
+}
+
+wide_fn! {
+    /// `dst[i] = sum_t kernel[t] src[i + t step]` (from zero, taps in order): a 1-D filter as a
+    /// sum of shifted copies, one vector operation per tap; `src` is `dst.len() + (taps - 1)
+    /// step` long.
+    fn shifted_sum(kernel: &[f32], src: &[f32], step: usize, dst: &mut [f32]) {
+        dst.fill(0.0);
+        let n = dst.len();
+        for (t, &kw) in kernel.iter().enumerate() {
+            for (d, s) in dst.iter_mut().zip(&src[t * step..t * step + n]) {
+                *d += kw * s;
+            }
+        }
+    }
 }
 
 /// A separable blur with a non-negative symmetric kernel in OpenCV's 8-bit fixed point (what
@@ -335,21 +337,7 @@ pub fn separable_filter_q8(input: &ImageView<'_>, output: &mut ImageViewMut<'_>,
     }
     let hpass = |y: usize, padded: &mut [u16], dst: &mut [u16]| {
         pad_row(input.row(y), c, r, padded, |v| v as u16);
-        // The kernel is symmetric: taps t and 2r - t share a weight, so each pair is one
-        // multiply of the two samples' sum (the same integers, modulo 2^16, as tap by tap).
-        let centre = &padded[r * c..r * c + row_len];
-        for (d, s) in dst.iter_mut().zip(centre) {
-            *d = q[r].wrapping_mul(*s);
-        }
-        for (t, &kw) in q[..r].iter().enumerate() {
-            if kw == 0 {
-                continue;
-            }
-            let (a, b) = (&padded[t * c..], &padded[(2 * r - t) * c..]);
-            for ((d, a), b) in dst.iter_mut().zip(&a[..row_len]).zip(&b[..row_len]) {
-                *d = d.wrapping_add(kw.wrapping_mul(a.wrapping_add(*b)));
-            }
-        }
+        q8_row(&q, padded, c, dst);
     };
     // Bands of rows; within a band the horizontal pass of each source row is kept in a ring of
     // 2r + 1 rows (small enough to stay in cache), so each is computed once per band.
@@ -381,26 +369,60 @@ pub fn separable_filter_q8(input: &ImageView<'_>, output: &mut ImageViewMut<'_>,
                     &mut padded,
                     &mut ring[slot(last)],
                 );
-                let row = |t: usize| &ring[slot(i0 + t)];
-                let kc = q[r] as u32;
-                for (a, s) in acc.iter_mut().zip(row(r)) {
-                    *a = (1 << 15) + kc * *s as u32;
-                }
-                for (t, &kw) in q[..r].iter().enumerate() {
-                    if kw == 0 {
-                        continue;
-                    }
-                    let kw = kw as u32;
-                    for ((a, s), u) in acc.iter_mut().zip(row(t)).zip(row(2 * r - t)) {
-                        *a += kw * (*s as u32 + *u as u32);
-                    }
-                }
-                for (o, a) in out.iter_mut().zip(&acc) {
-                    *o = (*a >> 16).min(255) as u8;
-                }
+                q8_column(&q, &ring, i0, &mut acc, out);
                 copy_alpha(format, input.row(y), out);
             }
         });
+}
+
+wide_fn! {
+    /// The horizontal pass of [`separable_filter_q8`] over one padded row (`r` pixels of `c`
+    /// samples each side): the kernel is symmetric, so taps t and 2r - t share a weight and each
+    /// pair is one multiply of the two samples' sum (the same integers, modulo 2^16, as tap by
+    /// tap).
+    fn q8_row(q: &[u16], padded: &[u16], c: usize, dst: &mut [u16]) {
+        let (r, row_len) = (q.len() / 2, dst.len());
+        let centre = &padded[r * c..r * c + row_len];
+        for (d, s) in dst.iter_mut().zip(centre) {
+            *d = q[r].wrapping_mul(*s);
+        }
+        for (t, &kw) in q[..r].iter().enumerate() {
+            if kw == 0 {
+                continue;
+            }
+            let (a, b) = (&padded[t * c..], &padded[(2 * r - t) * c..]);
+            for ((d, a), b) in dst.iter_mut().zip(&a[..row_len]).zip(&b[..row_len]) {
+                *d = d.wrapping_add(kw.wrapping_mul(a.wrapping_add(*b)));
+            }
+        }
+    }
+}
+
+wide_fn! {
+    /// The vertical pass of [`separable_filter_q8`] for one output row: the ring holds
+    /// `q.len()` horizontally filtered rows of `out.len()` samples, row `i0 + t` in slot `(i0 +
+    /// t) % q.len()`; rounded and saturated into `out` (`acc` is working space).
+    fn q8_column(q: &[u16], ring: &[u16], i0: usize, acc: &mut [u32], out: &mut [u8]) {
+        let (k, row_len) = (q.len(), out.len());
+        let r = k / 2;
+        let row = |t: usize| &ring[((i0 + t) % k) * row_len..((i0 + t) % k + 1) * row_len];
+        let kc = q[r] as u32;
+        for (a, s) in acc.iter_mut().zip(row(r)) {
+            *a = (1 << 15) + kc * *s as u32;
+        }
+        for (t, &kw) in q[..r].iter().enumerate() {
+            if kw == 0 {
+                continue;
+            }
+            let kw = kw as u32;
+            for ((a, s), u) in acc.iter_mut().zip(row(t)).zip(row(2 * r - t)) {
+                *a += kw * (*s as u32 + *u as u32);
+            }
+        }
+        for (o, a) in out.iter_mut().zip(acc.iter()) {
+            *o = (*a >> 16).min(255) as u8;
+        }
+    }
 }
 
 /// OpenCV's 8-bit RGB to HSV (`COLOR_RGB2HSV`): H in 0..180, S and V in 0..255, with OpenCV's
@@ -814,11 +836,7 @@ impl FloatImage {
                 let src = self.row(y);
                 let mut padded = vec![0f32; (w + 2 * r) * c];
                 pad_row_copy(src, c, r, &mut padded);
-                for (t, &kw) in kernel.iter().enumerate() {
-                    for (d, s) in dst.iter_mut().zip(&padded[t * c..t * c + row_len]) {
-                        *d += kw * s;
-                    }
-                }
+                shifted_sum(kernel, &padded, c, dst);
             });
         // Vertical: a sum of (reflected) rows.
         let mut out = frame_buffer(self.data.len());
@@ -827,9 +845,7 @@ impl FloatImage {
             .for_each(|(y, dst)| {
                 for (t, &kw) in kernel.iter().enumerate() {
                     let sy = reflect101(y as i64 + t as i64 - r as i64, h);
-                    for (d, s) in dst.iter_mut().zip(&tmp[sy * row_len..(sy + 1) * row_len]) {
-                        *d += kw * s;
-                    }
+                    add_scaled(kw, &tmp[sy * row_len..(sy + 1) * row_len], dst);
                 }
             });
         recycle(tmp);
@@ -973,17 +989,34 @@ impl GaussianRows {
             return;
         }
         let (y0, y1, wy) = self.ymap[y];
-        for ((o, a), b) in out.iter_mut().zip(self.rows.row(y0)).zip(self.rows.row(y1)) {
-            *o = a + (b - a) * wy;
+        lerp(self.rows.row(y0), self.rows.row(y1), wy, out);
+    }
+}
+
+wide_fn! {
+    /// `dst += k src`.
+    fn add_scaled(k: f32, src: &[f32], dst: &mut [f32]) {
+        for (d, s) in dst.iter_mut().zip(src) {
+            *d += k * s;
         }
     }
 }
 
-/// Rounds non-negative samples to u8 (saturating at 255).
-#[inline]
-pub fn round_u8(src: &[f32], dst: &mut [u8]) {
-    for (d, s) in dst.iter_mut().zip(src) {
-        *d = byte(s + 0.5);
+wide_fn! {
+    /// `out = a + (b - a) t`.
+    fn lerp(a: &[f32], b: &[f32], t: f32, out: &mut [f32]) {
+        for ((o, a), b) in out.iter_mut().zip(a).zip(b) {
+            *o = a + (b - a) * t;
+        }
+    }
+}
+
+wide_fn! {
+    /// Rounds non-negative samples to u8 (saturating at 255).
+    pub fn round_u8(src: &[f32], dst: &mut [u8]) {
+        for (d, s) in dst.iter_mut().zip(src) {
+            *d = byte(s + 0.5);
+        }
     }
 }
 
