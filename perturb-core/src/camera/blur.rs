@@ -124,32 +124,60 @@ impl CameraPerturbation for DefocusBlur {
                 for &(dy, hw) in group {
                     let (lo, hi) = ((pad - hw) * c, (pad + hw + 1) * c);
                     let (a, b) = (pre(dy), pre(-dy));
-                    if dy == 0 {
-                        for ((p, u), v) in part.iter_mut().zip(&a[hi..hi + w * c]).zip(&a[lo..]) {
-                            *p = p.wrapping_add(u.wrapping_sub(*v));
-                        }
-                        continue;
-                    }
                     let (ahi, alo) = (&a[hi..hi + w * c], &a[lo..lo + w * c]);
-                    let (bhi, blo) = (&b[hi..hi + w * c], &b[lo..lo + w * c]);
-                    for ((((p, u), v), s), t) in part.iter_mut().zip(ahi).zip(alo).zip(bhi).zip(blo)
-                    {
-                        *p = p
-                            .wrapping_add(u.wrapping_sub(*v))
-                            .wrapping_add(s.wrapping_sub(*t));
+                    if dy == 0 {
+                        disk_segments(&mut part, (ahi, alo), None);
+                    } else {
+                        disk_segments(&mut part, (ahi, alo), Some((&b[hi..][..w * c], &b[lo..])));
                     }
                 }
-                for (a, p) in acc.iter_mut().zip(&part) {
-                    *a += *p as u32;
-                }
+                widen_into(&part, &mut acc);
             }
             // The disk has an odd number of pixels, so no sum lies halfway between two levels:
             // round(a / n) = (a + n / 2) / n, the division as a multiplication.
-            for (d, a) in dst.iter_mut().zip(&acc) {
-                *d = (((*a + half) as u64 * recip) >> 32) as u8;
-            }
+            divide_rounded(&acc, half, recip, dst);
             copy_alpha(format, src, dst);
         });
+    }
+}
+
+wide_fn! {
+    /// Adds the segment sums `hi - lo` of one row of prefix sums (and of a second row when
+    /// given) to `part`, modulo 2^16.
+    fn disk_segments(part: &mut [u16], a: (&[u16], &[u16]), b: Option<(&[u16], &[u16])>) {
+        let (ahi, alo) = a;
+        match b {
+            None => {
+                for ((p, u), v) in part.iter_mut().zip(ahi).zip(alo) {
+                    *p = p.wrapping_add(u.wrapping_sub(*v));
+                }
+            }
+            Some((bhi, blo)) => {
+                for ((((p, u), v), s), t) in part.iter_mut().zip(ahi).zip(alo).zip(bhi).zip(blo) {
+                    *p = p
+                        .wrapping_add(u.wrapping_sub(*v))
+                        .wrapping_add(s.wrapping_sub(*t));
+                }
+            }
+        }
+    }
+}
+
+wide_fn! {
+    /// `acc += part`, widened.
+    fn widen_into(part: &[u16], acc: &mut [u32]) {
+        for (a, p) in acc.iter_mut().zip(part) {
+            *a += *p as u32;
+        }
+    }
+}
+
+wide_fn! {
+    /// `dst = (acc + half) recip >> 32`: a rounded division by a constant as a multiplication.
+    fn divide_rounded(acc: &[u32], half: u32, recip: u64, dst: &mut [u8]) {
+        for (d, a) in dst.iter_mut().zip(acc) {
+            *d = (((*a + half) as u64 * recip) >> 32) as u8;
+        }
     }
 }
 
