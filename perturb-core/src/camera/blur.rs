@@ -286,12 +286,7 @@ impl CameraPerturbation for MotionBlur {
                 let hi = (w as i64 - dx.max(0)).clamp(lo as i64, w as i64) as usize;
                 if hi > lo {
                     let shift = (lo as i64 + dx) as usize * c;
-                    for (a, s) in acc[lo * c..hi * c]
-                        .iter_mut()
-                        .zip(&row[shift..shift + (hi - lo) * c])
-                    {
-                        *a += *s as u16;
-                    }
+                    add_widened(&row[shift..shift + (hi - lo) * c], &mut acc[lo * c..hi * c]);
                 }
                 for x in (0..lo).chain(hi..w) {
                     let sx = xmap[x];
@@ -300,11 +295,27 @@ impl CameraPerturbation for MotionBlur {
                     }
                 }
             }
-            for (d, a) in dst.iter_mut().zip(&acc) {
-                *d = byte(*a as f32 * norm + 0.5);
-            }
+            scale_round(&acc, norm, dst);
             copy_alpha(format, src, dst);
         });
+    }
+}
+
+wide_fn! {
+    /// `acc += row`, widened to u16.
+    fn add_widened(row: &[u8], acc: &mut [u16]) {
+        for (a, s) in acc.iter_mut().zip(row) {
+            *a += *s as u16;
+        }
+    }
+}
+
+wide_fn! {
+    /// `dst = round(acc norm)` (half up), saturated.
+    fn scale_round(acc: &[u16], norm: f32, dst: &mut [u8]) {
+        for (d, a) in dst.iter_mut().zip(acc) {
+            *d = byte(*a as f32 * norm + 0.5);
+        }
     }
 }
 

@@ -497,23 +497,38 @@ impl CameraPerturbation for Sharpen {
         par_rows(input, output, |y, src, dst| {
             let rows = [-1i64, 0, 1].map(|d| input.row(reflect101(y as i64 + d, h)));
             // Vertical sums of the three rows, then 3x3 box sums along the row.
-            let col: Vec<i16> = rows[0][..row_len]
-                .iter()
-                .zip(&rows[1][..row_len])
-                .zip(&rows[2][..row_len])
-                .map(|((a, b), d)| *a as i16 + *b as i16 + *d as i16)
-                .collect();
+            let mut col = vec![0i16; row_len];
+            column_sums(rows, &mut col);
             let mut boxes = vec![0i16; row_len];
             box_sums(&col, &mut boxes, c);
-            for ((d, &v), &b) in dst.iter_mut().zip(&src[..row_len]).zip(&boxes) {
-                let v = v as i32;
-                let s = (centre * v - b as i32).clamp(0, 255);
-                let n = self.w10 * v + (10 - self.w10) * s;
-                let (q, r) = (n / 10, n % 10);
-                *d = (q + (r > 5 || (r == 5 && q & 1 == 1)) as i32) as u8;
-            }
+            sharpen_row(&src[..row_len], &boxes, centre, self.w10, dst);
             copy_alpha(format, src, dst);
         });
+    }
+}
+
+wide_fn! {
+    /// Sums of three rows, sample by sample.
+    fn column_sums(rows: [&[u8]; 3], col: &mut [i16]) {
+        let n = col.len();
+        let [a, b, d] = rows.map(|r| &r[..n]);
+        for (((o, a), b), d) in col.iter_mut().zip(a).zip(b).zip(d) {
+            *o = *a as i16 + *b as i16 + *d as i16;
+        }
+    }
+}
+
+wide_fn! {
+    /// The sharpened blend of one row: the 3x3 kernel's result `s = clamp(centre v - box)` and
+    /// `(w10 v + (10 - w10) s) / 10` rounded half to even.
+    fn sharpen_row(src: &[u8], boxes: &[i16], centre: i32, w10: i32, dst: &mut [u8]) {
+        for ((d, &v), &b) in dst.iter_mut().zip(src).zip(boxes) {
+            let v = v as i32;
+            let s = (centre * v - b as i32).clamp(0, 255);
+            let n = w10 * v + (10 - w10) * s;
+            let (q, r) = (n / 10, n % 10);
+            *d = (q + (r > 5 || (r == 5 && q & 1 == 1)) as i32) as u8;
+        }
     }
 }
 
