@@ -228,7 +228,7 @@ fn distortion_moves_with_severity_on_a_real_frame() {
 fn wide_and_baseline_code_give_the_same_bytes() {
     use perturb_core::camera::ops::{force_baseline, wide_available};
     if !wide_available() {
-        eprintln!("this CPU has no AVX2 + FMA: only the baseline code runs, nothing to compare");
+        eprintln!("this CPU has no AVX2: only the baseline code runs, nothing to compare");
         return;
     }
     // Odd sizes (vector loops with remainders) in every format; the real frame when present.

@@ -51,27 +51,42 @@ impl QuantileTables {
         let format = input.format;
         let t = &self.0;
         par_rows(input, output, |y, src, dst| {
-            let mut rng = row_rng(seed, seq, salt, y);
-            let mut draw = Draws::default();
-            match format.alpha_offset() {
-                None => {
-                    for (s, d) in src.iter().zip(dst.iter_mut()) {
-                        *d = t[*s as usize][draw.next(&mut rng)];
-                    }
+            let rng = row_rng(seed, seq, salt, y);
+            table_row(t, rng, format.alpha_offset(), src, dst);
+        });
+    }
+}
+
+wide_fn! {
+    /// One row of [`QuantileTables::apply`]: each colour byte `v` becomes `t[v][k]` for the next
+    /// draw `k` of `rng`; the alpha byte (at `alpha` in 4-byte pixels) is copied.
+    fn table_row(
+        t: &[[u8; QN]; 256],
+        rng: Rng,
+        alpha: Option<usize>,
+        src: &[u8],
+        dst: &mut [u8],
+    ) {
+        let mut rng = rng;
+        let mut draw = Draws::default();
+        match alpha {
+            None => {
+                for (s, d) in src.iter().zip(dst.iter_mut()) {
+                    *d = t[*s as usize][draw.next(&mut rng)];
                 }
-                Some(a) => {
-                    for (s, d) in src.chunks_exact(4).zip(dst.chunks_exact_mut(4)) {
-                        for c in 0..4 {
-                            d[c] = if c == a {
-                                s[c]
-                            } else {
-                                t[s[c] as usize][draw.next(&mut rng)]
-                            };
-                        }
+            }
+            Some(a) => {
+                for (s, d) in src.chunks_exact(4).zip(dst.chunks_exact_mut(4)) {
+                    for c in 0..4 {
+                        d[c] = if c == a {
+                            s[c]
+                        } else {
+                            t[s[c] as usize][draw.next(&mut rng)]
+                        };
                     }
                 }
             }
-        });
+        }
     }
 }
 

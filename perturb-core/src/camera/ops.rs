@@ -20,8 +20,9 @@ where
         .for_each(|(y, out)| f(y, input.row(y), out));
 }
 
-/// Whether the functions defined with `wide_fn!` run their AVX2 + FMA copy: on x86-64 CPUs
-/// that have both, unless [`force_baseline`] is on. The check is two cached loads.
+/// Whether the functions defined with `wide_fn!` run their AVX2 copy: on x86-64 CPUs that have
+/// AVX2, FMA, BMI1, BMI2 and LZCNT (the x86-64-v3 level, every x86-64 CPU since about 2015),
+/// unless [`force_baseline`] is on. The check is a few cached loads.
 #[inline]
 pub fn wide_available() -> bool {
     #[cfg(target_arch = "x86_64")]
@@ -29,6 +30,9 @@ pub fn wide_available() -> bool {
         !BASELINE_ONLY.load(std::sync::atomic::Ordering::Relaxed)
             && std::arch::is_x86_feature_detected!("avx2")
             && std::arch::is_x86_feature_detected!("fma")
+            && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("lzcnt")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -46,7 +50,8 @@ pub fn force_baseline(on: bool) {
 }
 
 /// Defines a function whose body is compiled twice, for the build's baseline target and for
-/// AVX2 + FMA, and runs the copy this CPU can run ([`wide_available`]). The inner loops of the
+/// AVX2 (with FMA, BMI1, BMI2 and LZCNT), and runs the copy this CPU can run
+/// ([`wide_available`]). The inner loops of the
 /// AVX2 copy work on eight floats or 32-bit integers at a time instead of four (the build's
 /// baseline, `x86-64-v2`, has 128-bit vectors only). Both copies compute the same values: Rust
 /// never fuses a multiply and an add by itself or reorders float arithmetic, so wider
@@ -66,14 +71,14 @@ macro_rules! wide_fn {
         $(#[$meta])*
         $vis fn $name $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? {
             #[cfg(target_arch = "x86_64")]
-            #[target_feature(enable = "avx2,fma")]
+            #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt")]
             fn wide $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? $body
             #[inline(always)]
             fn base $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
             if $crate::camera::ops::wide_available() {
-                // SAFETY: the CPU has AVX2 and FMA (`wide_available` checked), which is all a
-                // function compiled for them needs.
+                // SAFETY: the CPU has every feature the copy is compiled for (`wide_available`
+                // checked), which is all such a function needs.
                 return unsafe { wide $(::<$($cg),+>)? ($($arg),*) };
             }
             base $(::<$($cg),+>)? ($($arg),*)
