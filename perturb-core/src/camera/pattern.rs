@@ -5,7 +5,7 @@
 //! dotted lines, zigzag, cutout) are redrawn every frame from (seed, sequence number), as the
 //! references redraw them on every call.
 
-use super::ops::{copy_alpha, par_rows};
+use super::ops::{copy_alpha, par_rows, wide_fn};
 use super::texture::{fill_disc, fill_rect, size_scale};
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut};
@@ -208,7 +208,6 @@ fn canny_padded(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> (Vec<bo
     // gx = S[x + 1] - S[x - 1] and gy = D[x - 1] + 2 D[x] + D[x + 1] (columns clamped). Each pixel
     // keeps its L1 magnitude (at most 2040, 11 bits) and the direction its non-maximum test looks
     // along (bits 12-13): 0 horizontal, 1 vertical, 2 and 3 the diagonals.
-    let (tg22, tg67) = (0.414_213_56f64, 2.414_213_56f64);
     let mut grad = vec![0u16; pw * (h + 2)];
     grad.par_chunks_mut(pw)
         .enumerate()
@@ -218,24 +217,7 @@ fn canny_padded(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> (Vec<bo
             let y = py - 1;
             let row = |y: usize| &gray[y * w..(y + 1) * w];
             let (up, mid, down) = (row(y.saturating_sub(1)), row(y), row((y + 1).min(h - 1)));
-            let mut s = vec![0i16; w + 2];
-            let mut d = vec![0i16; w + 2];
-            for (x, ((&u, &m), &n)) in up.iter().zip(mid).zip(down).enumerate() {
-                s[x + 1] = u as i16 + 2 * m as i16 + n as i16;
-                d[x + 1] = n as i16 - u as i16;
-            }
-            (s[0], s[w + 1], d[0], d[w + 1]) = (s[1], s[w], d[1], d[w]);
-            for (x, g) in out[1..=w].iter_mut().enumerate() {
-                let gx = s[x + 2] - s[x];
-                let gy = d[x] + 2 * d[x + 1] + d[x + 2];
-                // Branch-free: the direction is stored for every pixel and read only above `low`.
-                let (ax, ay) = (gx.abs() as f64, gy.abs() as f64);
-                let near_horizontal = (ay <= ax * tg22) as u16;
-                let near_vertical = (ay >= ax * tg67) as u16;
-                let diagonal = 3 - ((gx > 0) == (gy > 0)) as u16;
-                let dir = (diagonal - near_vertical * (diagonal - 1)) * (1 - near_horizontal);
-                *g = (gx.abs() + gy.abs()) as u16 | dir << 12;
-            }
+            sobel_row([up, mid, down], &mut out[1..=w]);
         });
     // Non-maximum suppression, row by row: 0 not an edge, 1 weak candidate, 2 strong. A pixel is
     // a maximum when its magnitude exceeds the neighbour before it along its direction and is not
@@ -250,21 +232,12 @@ fn canny_padded(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> (Vec<bo
         .take(h)
         .map(|(py, out)| {
             let row = |py: usize| &grad[py * pw..(py + 1) * pw];
-            let (up, cur, down) = (row(py - 1), row(py), row(py + 1));
-            let m = |g: u16| (g & 0xFFF) as i16;
-            for (x, o) in out[1..=w].iter_mut().enumerate() {
-                let g = cur[x + 1];
-                let (v, dir) = (m(g), g >> 12);
-                let horizontal = (v > m(cur[x])) & (v >= m(cur[x + 2]));
-                let vertical = (v > m(up[x + 1])) & (v >= m(down[x + 1]));
-                let falling = (v > m(up[x])) & (v >= m(down[x + 2]));
-                let rising = (v > m(up[x + 2])) & (v >= m(down[x]));
-                let is_max = (horizontal & (dir == 0))
-                    | (vertical & (dir == 1))
-                    | (falling & (dir == 2))
-                    | (rising & (dir == 3));
-                *o = (is_max & (v > low)) as u8 * (1 + (v > high) as u8);
-            }
+            suppress_row(
+                [row(py - 1), row(py), row(py + 1)],
+                low,
+                high,
+                &mut out[1..=w],
+            );
             let strong = out.iter().enumerate().filter(|(_, s)| **s == 2);
             strong.map(|(x, _)| py * pw + x).collect()
         })
@@ -287,6 +260,56 @@ fn canny_padded(gray: &[u8], w: usize, h: usize, low: i32, high: i32) -> (Vec<bo
         }
     }
     (edge, pw)
+}
+
+wide_fn! {
+    /// One row of [`canny_padded`]'s Sobel pass from the grey rows above, at and below: per
+    /// pixel the L1 magnitude and the direction code in bits 12-13.
+    fn sobel_row(rows: [&[u8]; 3], out: &mut [u16]) {
+        let (tg22, tg67) = (0.414_213_56f64, 2.414_213_56f64);
+        let [up, mid, down] = rows;
+        let w = out.len();
+        let mut s = vec![0i16; w + 2];
+        let mut d = vec![0i16; w + 2];
+        for (x, ((&u, &m), &n)) in up.iter().zip(mid).zip(down).enumerate() {
+            s[x + 1] = u as i16 + 2 * m as i16 + n as i16;
+            d[x + 1] = n as i16 - u as i16;
+        }
+        (s[0], s[w + 1], d[0], d[w + 1]) = (s[1], s[w], d[1], d[w]);
+        for (x, g) in out.iter_mut().enumerate() {
+            let gx = s[x + 2] - s[x];
+            let gy = d[x] + 2 * d[x + 1] + d[x + 2];
+            // Branch-free: the direction is stored for every pixel and read only above `low`.
+            let (ax, ay) = (gx.abs() as f64, gy.abs() as f64);
+            let near_horizontal = (ay <= ax * tg22) as u16;
+            let near_vertical = (ay >= ax * tg67) as u16;
+            let diagonal = 3 - ((gx > 0) == (gy > 0)) as u16;
+            let dir = (diagonal - near_vertical * (diagonal - 1)) * (1 - near_horizontal);
+            *g = (gx.abs() + gy.abs()) as u16 | dir << 12;
+        }
+    }
+}
+
+wide_fn! {
+    /// One row of [`canny_padded`]'s non-maximum suppression from the padded gradient rows
+    /// above, at and below (`out` is the row's interior, one shorter than the rows at each end).
+    fn suppress_row(rows: [&[u16]; 3], low: i16, high: i16, out: &mut [u8]) {
+        let [up, cur, down] = rows;
+        let m = |g: u16| (g & 0xFFF) as i16;
+        for (x, o) in out.iter_mut().enumerate() {
+            let g = cur[x + 1];
+            let (v, dir) = (m(g), g >> 12);
+            let horizontal = (v > m(cur[x])) & (v >= m(cur[x + 2]));
+            let vertical = (v > m(up[x + 1])) & (v >= m(down[x + 1]));
+            let falling = (v > m(up[x])) & (v >= m(down[x + 2]));
+            let rising = (v > m(up[x + 2])) & (v >= m(down[x]));
+            let is_max = (horizontal & (dir == 0))
+                | (vertical & (dir == 1))
+                | (falling & (dir == 2))
+                | (rising & (dir == 3));
+            *o = (is_max & (v > low)) as u8 * (1 + (v > high) as u8);
+        }
+    }
 }
 
 /// C-E4 canny_edges: the frame dimmed to 70 % with red (255, 0, 0) Canny edges added at 30 %:
