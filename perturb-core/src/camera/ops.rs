@@ -51,16 +51,18 @@ pub fn force_baseline(on: bool) {
 
 /// Defines a function whose body is compiled twice, for the build's baseline target and for
 /// AVX2 (with FMA, BMI1, BMI2 and LZCNT), and runs the copy this CPU can run
-/// ([`wide_available`]). The inner loops of the
-/// AVX2 copy work on eight floats or 32-bit integers at a time instead of four (the build's
-/// baseline, `x86-64-v2`, has 128-bit vectors only). Both copies compute the same values: Rust
-/// never fuses a multiply and an add by itself or reorders float arithmetic, so wider
-/// instructions change only how many lanes run at once; a test compares the two paths on every
-/// camera perturbation. For kernels that run per row or per band (the check costs two loads);
-/// functions the body calls get the wider code only where they are inlined into it. Closures
-/// in the body are compiled for AVX2 too, so library code that calls them without being inlined
-/// (`collect`, `for_each` on long adapter chains) cannot inline them back and calls them once per
-/// element: write such loops as `for` loops over slices. Const generic parameters are
+/// ([`wide_available`]). The AVX2 copy's inner loops work on eight floats or 32-bit integers at a
+/// time instead of four (the baseline, `x86-64-v2`, has 128-bit vectors only). Both copies compute
+/// the same values: Rust never fuses a multiply and an add by itself or reorders float
+/// arithmetic, so wider instructions change only how many lanes run at once; a test compares the
+/// two paths on every camera perturbation. Calling the AVX2 copy is the crate's one `unsafe`
+/// operation, sound because the features are checked first.
+///
+/// Meant for kernels that run per row or per band (the check is a few cached loads per call).
+/// Functions the body calls get the wider code only where they are inlined into it. Closures in
+/// the body are compiled for AVX2 too, so library code that calls them without being inlined
+/// (`collect`, `for_each` on long adapter chains) cannot inline them back and calls them once
+/// per element: write such loops as `for` loops over slices. Const generic parameters are
 /// supported, type parameters are not.
 macro_rules! wide_fn {
     (
