@@ -1,7 +1,7 @@
 //! Distortion family (C-D): geometric and sharpness changes.
 
 use super::ops::{
-    copy_alpha, fill_quarters, gaussian_kernel, pad_row_copy, par_rows, reflect101, row_rng,
+    byte, copy_alpha, fill_quarters, gaussian_kernel, pad_row_copy, par_rows, reflect101, row_rng,
     wide_fn,
 };
 use super::{CameraBuilder, CameraPerturbation};
@@ -430,10 +430,11 @@ impl CameraPerturbation for SamplePairing {
                 .zip(rb)
                 .map(|(&p, &q)| p as f32 * (1.0 - wy) + q as f32 * wy)
                 .collect();
+            let mut hrow = vec![0f32; src.len()];
             match c {
-                1 => pair_row::<1>(&vrow, &cols, a, src, dst),
-                3 => pair_row::<3>(&vrow, &cols, a, src, dst),
-                _ => pair_row::<4>(&vrow, &cols, a, src, dst),
+                1 => pair_row::<1>(&vrow, &cols, a, src, &mut hrow, dst),
+                3 => pair_row::<3>(&vrow, &cols, a, src, &mut hrow, dst),
+                _ => pair_row::<4>(&vrow, &cols, a, src, &mut hrow, dst),
             }
             copy_alpha(format, src, dst);
         });
@@ -441,20 +442,33 @@ impl CameraPerturbation for SamplePairing {
 }
 
 /// One row of [`SamplePairing`]: the crop sample `p` at each output pixel is the horizontal blend
-/// of the vertically blended crop row `vrow` at `cols[x]`, rounded; `out = a I + (1 - a) p`.
+/// of the vertically blended crop row `vrow` at `cols[x]`, rounded; `out = a I + (1 - a) p`. The
+/// taps are gathered pixel by pixel into `hrow` (`src.len()` floats), then the rounding and the
+/// blend run over contiguous samples.
 fn pair_row<const C: usize>(
     vrow: &[f32],
     cols: &[(usize, usize, f32)],
     a: f32,
     src: &[u8],
+    hrow: &mut [f32],
     dst: &mut [u8],
 ) {
-    for ((q, s), &(xa, xb, wx)) in dst.chunks_exact_mut(C).zip(src.chunks_exact(C)).zip(cols) {
+    for (h, &(xa, xb, wx)) in hrow.chunks_exact_mut(C).zip(cols) {
         let va: [f32; C] = vrow[xa..xa + C].try_into().expect("C samples");
         let vb: [f32; C] = vrow[xb..xb + C].try_into().expect("C samples");
         for k in 0..C {
-            let p = (va[k] * (1.0 - wx) + vb[k] * wx + 0.5) as u8;
-            q[k] = (a * s[k] as f32 + (1.0 - a) * p as f32 + 0.5) as u8;
+            h[k] = va[k] * (1.0 - wx) + vb[k] * wx + 0.5;
+        }
+    }
+    pair_blend(hrow, a, src, dst);
+}
+
+wide_fn! {
+    /// `dst = round(a src + (1 - a) trunc(h))` (with `h` already offset by one half).
+    fn pair_blend(h: &[f32], a: f32, src: &[u8], dst: &mut [u8]) {
+        for ((q, &s), &h) in dst.iter_mut().zip(src).zip(h) {
+            let p = byte(h);
+            *q = byte(a * s as f32 + (1.0 - a) * p as f32 + 0.5);
         }
     }
 }
