@@ -1,6 +1,6 @@
 //! Colour and tone family (C-F): changes of hue, saturation and tone.
 
-use super::ops::{apply_lut, map_saturation, map_value, par_rows};
+use super::ops::{apply_lut, byte, map_saturation, map_value, par_rows, wide_fn};
 use super::{CameraBuilder, CameraPerturbation, CameraSetup};
 use crate::error::Error;
 use crate::image::{ImageView, ImageViewMut};
@@ -342,26 +342,39 @@ pub fn clahe(plane: &[u8], w: usize, h: usize, clip: f64, tiles: usize) -> Vec<u
         }
     }
     let mut out = vec![0u8; w * h];
-    out.par_chunks_mut(w.max(1))
-        .enumerate()
-        .for_each(|(y, row)| {
+    out.par_chunks_mut(w.max(1)).enumerate().for_each_init(
+        || vec![0f32; w],
+        |vals, (y, row)| {
             let (ty1, ty2, ya) = coord(y, inv_th);
             let src = &plane[y * w..(y + 1) * w];
+            // The table lookups pixel by pixel into floats, then the rounding to bytes in
+            // one vectorised pass (a float-to-byte cast per pixel does not vectorise).
             for &(x0, x1, tx1, tx2) in &runs {
                 let lut = |tx: usize, ty: usize| &luts[ty * tiles + tx];
                 let (a, b) = (lut(tx1, ty1), lut(tx2, ty1));
                 let (c, d) = (lut(tx1, ty2), lut(tx2, ty2));
                 for ((o, &v), &(_, _, xa)) in
-                    row[x0..x1].iter_mut().zip(&src[x0..x1]).zip(&xs[x0..x1])
+                    vals[x0..x1].iter_mut().zip(&src[x0..x1]).zip(&xs[x0..x1])
                 {
                     let v = v as usize;
                     let top = a[v] as f32 * (1.0 - xa) + b[v] as f32 * xa;
                     let bot = c[v] as f32 * (1.0 - xa) + d[v] as f32 * xa;
-                    *o = (top * (1.0 - ya) + bot * ya).round().clamp(0.0, 255.0) as u8;
+                    *o = top * (1.0 - ya) + bot * ya;
                 }
             }
-        });
+            round_bytes(vals, row);
+        },
+    );
     out
+}
+
+wide_fn! {
+    /// `dst = clamp(round(src))` (half away from zero), NaN to 0.
+    fn round_bytes(src: &[f32], dst: &mut [u8]) {
+        for (d, s) in dst.iter_mut().zip(src) {
+            *d = byte(s.round());
+        }
+    }
 }
 
 /// Reflect-101 for indices past the end only (padding to whole tiles is on the bottom and right).
