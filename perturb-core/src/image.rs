@@ -520,6 +520,21 @@ pub fn resize_bilinear(src: &ImageView<'_>, width: u32, height: u32) -> Image {
     out
 }
 
+/// A one-row RGB test image of `w` pixels whose bytes step by `step` (mod 256), so that every
+/// channel differs from its neighbours and format conversions show.
+#[cfg(test)]
+pub(crate) fn rgb_test_row(w: u32, step: usize) -> Image {
+    let n = w as usize * 3;
+    Image::from_vec(
+        (0..n).map(|i| (i * step % 256) as u8).collect(),
+        w,
+        1,
+        n,
+        PixelFormat::Rgb8,
+    )
+    .expect("a valid one-row image")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -556,14 +571,7 @@ mod tests {
 
     #[test]
     fn luma_row_matches_luma_in_every_format() {
-        let rgb = Image::from_vec(
-            (0..7 * 3).map(|i| (i * 37 % 256) as u8).collect(),
-            7,
-            1,
-            21,
-            PixelFormat::Rgb8,
-        )
-        .unwrap();
+        let rgb = rgb_test_row(7, 37);
         let want: Vec<u8> = rgb
             .data
             .chunks_exact(3)

@@ -107,37 +107,48 @@ impl CameraPerturbation for DefocusBlur {
         let format = input.format;
         let count = self.count as u64;
         let (half, recip) = ((count / 2) as u32, (1u64 << 32).div_ceil(count));
-        par_rows(input, output, |y, src, dst| {
-            let mut acc = vec![0u32; w * c];
-            let mut part = vec![0u16; w * c];
-            // Rows dy and -dy have the same half-width: they are summed together. Segment
-            // [x - hw, x + hw] of the unpadded row = padded [x + pad - hw, x + pad + hw].
-            let pre = |dy: i64| {
-                let sy = reflect101(y as i64 + dy, h);
-                &prefix[sy * (pw + 1) * c..(sy + 1) * (pw + 1) * c]
-            };
-            let pairs: Vec<(i64, usize)> = (0..=r as i64)
-                .map(|dy| (dy, self.half_widths[r + dy as usize]))
-                .collect();
-            for group in pairs.chunks((per_group / 2).max(1)) {
-                part.fill(0);
-                for &(dy, hw) in group {
-                    let (lo, hi) = ((pad - hw) * c, (pad + hw + 1) * c);
-                    let (a, b) = (pre(dy), pre(-dy));
-                    let (ahi, alo) = (&a[hi..hi + w * c], &a[lo..lo + w * c]);
-                    if dy == 0 {
-                        disk_segments(&mut part, (ahi, alo), None);
-                    } else {
-                        disk_segments(&mut part, (ahi, alo), Some((&b[hi..][..w * c], &b[lo..])));
+        let group_len = (per_group / 2).max(1);
+        let rows = output.rows_mut();
+        rows.into_par_iter()
+            .with_min_len(8)
+            .enumerate()
+            .for_each_init(
+                || (vec![0u32; w * c], vec![0u16; w * c]),
+                |(acc, part), (y, dst)| {
+                    let src = input.row(y);
+                    acc.fill(0);
+                    // Rows dy and -dy have the same half-width: they are summed together. Segment
+                    // [x - hw, x + hw] of the unpadded row = padded [x + pad - hw, x + pad + hw].
+                    let pre = |dy: i64| {
+                        let sy = reflect101(y as i64 + dy, h);
+                        &prefix[sy * (pw + 1) * c..(sy + 1) * (pw + 1) * c]
+                    };
+                    // Half-widths of the rows dy = 0..=r, in groups.
+                    for (g, group) in self.half_widths[r..].chunks(group_len).enumerate() {
+                        part.fill(0);
+                        for (i, &hw) in group.iter().enumerate() {
+                            let dy = (g * group_len + i) as i64;
+                            let (lo, hi) = ((pad - hw) * c, (pad + hw + 1) * c);
+                            let (a, b) = (pre(dy), pre(-dy));
+                            let (ahi, alo) = (&a[hi..hi + w * c], &a[lo..lo + w * c]);
+                            if dy == 0 {
+                                disk_segments(part, (ahi, alo), None);
+                            } else {
+                                disk_segments(
+                                    part,
+                                    (ahi, alo),
+                                    Some((&b[hi..][..w * c], &b[lo..])),
+                                );
+                            }
+                        }
+                        widen_into(part, acc);
                     }
-                }
-                widen_into(&part, &mut acc);
-            }
-            // The disk has an odd number of pixels, so no sum lies halfway between two levels:
-            // round(a / n) = (a + n / 2) / n, the division as a multiplication.
-            divide_rounded(&acc, half, recip, dst);
-            copy_alpha(format, src, dst);
-        });
+                    // The disk has an odd number of pixels, so no sum lies halfway between two levels:
+                    // round(a / n) = (a + n / 2) / n, the division as a multiplication.
+                    divide_rounded(acc, half, recip, dst);
+                    copy_alpha(format, src, dst);
+                },
+            );
     }
 }
 
@@ -271,17 +282,12 @@ impl CameraPerturbation for MotionBlur {
         );
         let norm = 1.0 / self.taps.len().max(1) as f32;
         let format = input.format;
-        let xmaps: Vec<Vec<usize>> = self
-            .taps
-            .iter()
-            .map(|&(_, dx)| (0..w).map(|x| reflect101(x as i64 + dx, w)).collect())
-            .collect();
         par_rows(input, output, |y, src, dst| {
             let mut acc = vec![0u16; w * c];
-            for (&(dy, dx), xmap) in self.taps.iter().zip(&xmaps) {
+            for &(dy, dx) in &self.taps {
                 let row = input.row(reflect101(y as i64 + dy, h));
                 // Inside the frame a tap is a shifted copy of the row (one contiguous add);
-                // only the border columns go through the reflected index map.
+                // only the border columns are reflected one by one.
                 let lo = ((-dx).max(0) as usize).min(w);
                 let hi = (w as i64 - dx.max(0)).clamp(lo as i64, w as i64) as usize;
                 if hi > lo {
@@ -289,7 +295,7 @@ impl CameraPerturbation for MotionBlur {
                     add_widened(&row[shift..shift + (hi - lo) * c], &mut acc[lo * c..hi * c]);
                 }
                 for x in (0..lo).chain(hi..w) {
-                    let sx = xmap[x];
+                    let sx = reflect101(x as i64 + dx, w);
                     for ch in 0..c {
                         acc[x * c + ch] += row[sx * c + ch] as u16;
                     }
@@ -344,14 +350,35 @@ pub fn zoom_factors(end: f64, step: f64) -> Vec<f64> {
 /// z), in 8.8 fixed point, the average rounded half up. Per factor and row the two source rows are
 /// blended vertically over the columns the crop reads, then horizontally in runs of constant source offset.
 pub struct ZoomBlur {
-    factors: Vec<f64>,
+    /// The terms that are the frame itself: the frame plus every z = 1 in the list.
+    identities: u32,
+    /// Terms averaged: the frame plus one per factor.
+    terms: u32,
+    /// Per factor other than 1, for the configured frame size: column taps, the columns they
+    /// read (lo..hi), row taps.
+    maps: Vec<(ZoomTaps, usize, usize, Vec<AxisTap>)>,
 }
 
 /// Registry constructor of C-B4.
 pub const ZOOM_BLUR: CameraBuilder = |s| {
     let (end, step) = ZOOM[s.level()];
+    let factors = zoom_factors(end, step);
+    let (w, h) = (s.geometry.width as usize, s.geometry.height as usize);
+    let c = s.geometry.format.channels();
+    let maps = factors
+        .iter()
+        .filter(|&&z| z != 1.0)
+        .map(|&z| {
+            let xm = zoom_axis(w, z);
+            let lo = xm.first().map_or(0, |t| t.0 as usize);
+            let hi = xm.last().map_or(0, |t| t.0 as usize + 2).min(w);
+            (ZoomTaps::new(&xm, lo, c), lo, hi, zoom_axis(h, z))
+        })
+        .collect();
     Ok(Box::new(ZoomBlur {
-        factors: zoom_factors(end, step),
+        identities: factors.iter().filter(|&&z| z == 1.0).count() as u32 + 1,
+        terms: factors.len() as u32 + 1,
+        maps,
     }))
 };
 
@@ -497,21 +524,7 @@ impl CameraPerturbation for ZoomBlur {
             input.height as usize,
             input.format.channels(),
         );
-        // Per factor: column taps, the columns they read (lo..hi), row taps. z = 1 is the
-        // identity and is added as such.
-        let identities = self.factors.iter().filter(|&&z| z == 1.0).count() as u32 + 1;
-        let maps: Vec<(ZoomTaps, usize, usize, Vec<AxisTap>)> = self
-            .factors
-            .iter()
-            .filter(|&&z| z != 1.0)
-            .map(|&z| {
-                let xm = zoom_axis(w, z);
-                let lo = xm.first().map_or(0, |t| t.0 as usize);
-                let hi = xm.last().map_or(0, |t| t.0 as usize + 2).min(w);
-                (ZoomTaps::new(&xm, lo, c), lo, hi, zoom_axis(h, z))
-            })
-            .collect();
-        let n = (self.factors.len() + 1) as u32;
+        let (identities, n) = (self.identities, self.terms);
         let (half, recip) = (n << 15, (1u32 << 20).div_ceil(n));
         let format = input.format;
         let rows = output.rows_mut();
@@ -527,7 +540,7 @@ impl CameraPerturbation for ZoomBlur {
                     // integers as the direct 2x2 blend, so the same result).
                     let src = input.row(y);
                     zoom_start(src, identities, acc);
-                    for (xm, lo, hi, ym) in &maps {
+                    for (xm, lo, hi, ym) in &self.maps {
                         let (y0, wy) = ym[y];
                         let (y0, y1) = (y0 as usize, (y0 as usize + 1).min(h - 1));
                         let (r0, r1) = (

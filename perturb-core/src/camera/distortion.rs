@@ -57,10 +57,12 @@ wide_fn! {
     /// window's margins). Pixel `x` of row `y` samples `(x + dx[x], y + dy[x])`; `C` bytes per pixel,
     /// all interpolated. `columns` holds x as f32 for each x; the displacements must stay within the
     /// window's margin less one pixel (they are clamped to it, so a larger one cannot read outside).
+    /// `taps` is working space (one entry per pixel).
     fn remap_row<const C: usize>(
         win: &Window,
         y: usize,
         fields: (&[f32], &[f32], &[f32]),
+        taps: &mut Vec<(u32, u32, u32)>,
         dst: &mut [u8],
     ) {
         let (columns, dx, dy) = fields;
@@ -74,7 +76,7 @@ wide_fn! {
         // Per pixel: the window offset of its top-left tap and the two fractions.
         // A plain loop, not `collect`: a closure inside a `wide_fn!` body is compiled for AVX2,
         // and the library's collecting code (compiled for the baseline) cannot inline it.
-        let mut taps = vec![(0u32, 0u32, 0u32); columns.len()];
+        taps.resize(columns.len(), (0, 0, 0));
         for (t, ((&ox, &x), &oy)) in taps.iter_mut().zip(dx.iter().zip(columns).zip(dy)) {
             let (fx, fy) = (round((x + ox) * 32.0), round((yf + oy) * 32.0));
             let wx = (pad + (fx >> 5)).clamp(0, w + 2 * pad - 2);
@@ -87,7 +89,7 @@ wide_fn! {
         }
         let data = &win.data[..];
         let stride = win.stride;
-        for (q, &(at, ax, ay)) in dst.chunks_exact_mut(C).zip(&taps) {
+        for (q, &(at, ax, ay)) in dst.chunks_exact_mut(C).zip(taps.iter()) {
             let at = at as usize;
             let weights = [
                 (32 - ax) * (32 - ay),
@@ -194,6 +196,7 @@ impl CameraPerturbation for Elastic {
                     fill(i, &mut ring);
                 }
                 let mut d = [vec![0f32; w], vec![0f32; w]];
+                let mut taps = Vec::with_capacity(w);
                 for (y, dst) in chunk {
                     let i0 = y - y0;
                     fill(i0 + k - 1, &mut ring);
@@ -203,9 +206,9 @@ impl CameraPerturbation for Elastic {
                     }
                     let fields = (&columns[..], &d[0][..], &d[1][..]);
                     match c {
-                        1 => remap_row::<1>(&win, y, fields, dst),
-                        3 => remap_row::<3>(&win, y, fields, dst),
-                        _ => remap_row::<4>(&win, y, fields, dst),
+                        1 => remap_row::<1>(&win, y, fields, &mut taps, dst),
+                        3 => remap_row::<3>(&win, y, fields, &mut taps, dst),
+                        _ => remap_row::<4>(&win, y, fields, &mut taps, dst),
                     }
                     copy_alpha(format, input.row(y), dst);
                 }
@@ -417,27 +420,32 @@ impl CameraPerturbation for SamplePairing {
             .into_iter()
             .map(|(xa, xb, wx)| (xa - lo, xb - lo, wx))
             .collect();
-        par_rows(input, output, |y, src, dst| {
-            let (ya, yb, wy) = tap(
-                oy + ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (ch - 1) as f32),
-                h,
+        let rows = output.rows_mut();
+        rows.into_par_iter()
+            .with_min_len(8)
+            .enumerate()
+            .for_each_init(
+                || (vec![0f32; hi - lo], vec![0f32; w * c]),
+                |(vrow, hrow), (y, dst)| {
+                    let src = input.row(y);
+                    let (ya, yb, wy) = tap(
+                        oy + ((y as f32 + 0.5) * sy - 0.5).clamp(0.0, (ch - 1) as f32),
+                        h,
+                    );
+                    // Bilinear interpolation is separable: the vertical blend of the two crop
+                    // rows once per column, then one horizontal blend per output sample.
+                    let (ra, rb) = (&input.row(ya)[lo..hi], &input.row(yb)[lo..hi]);
+                    for ((v, &p), &q) in vrow.iter_mut().zip(ra).zip(rb) {
+                        *v = p as f32 * (1.0 - wy) + q as f32 * wy;
+                    }
+                    match c {
+                        1 => pair_row::<1>(vrow, &cols, a, src, hrow, dst),
+                        3 => pair_row::<3>(vrow, &cols, a, src, hrow, dst),
+                        _ => pair_row::<4>(vrow, &cols, a, src, hrow, dst),
+                    }
+                    copy_alpha(format, src, dst);
+                },
             );
-            // Bilinear interpolation is separable: the vertical blend of the two crop rows once
-            // per column, then one horizontal blend per output sample.
-            let (ra, rb) = (&input.row(ya)[lo..hi], &input.row(yb)[lo..hi]);
-            let vrow: Vec<f32> = ra
-                .iter()
-                .zip(rb)
-                .map(|(&p, &q)| p as f32 * (1.0 - wy) + q as f32 * wy)
-                .collect();
-            let mut hrow = vec![0f32; src.len()];
-            match c {
-                1 => pair_row::<1>(&vrow, &cols, a, src, &mut hrow, dst),
-                3 => pair_row::<3>(&vrow, &cols, a, src, &mut hrow, dst),
-                _ => pair_row::<4>(&vrow, &cols, a, src, &mut hrow, dst),
-            }
-            copy_alpha(format, src, dst);
-        });
     }
 }
 

@@ -301,6 +301,12 @@ fn scaled_table(base: &[u16; 64], quality: u8) -> [f32; 64] {
     base.map(|b| ((b as u32 * scale + 50) / 100).clamp(1, 255) as f32)
 }
 
+/// A quantisation table (natural order) transposed, with its reciprocals.
+fn transposed_steps(q: &[f32; 64]) -> (Block, Block) {
+    let q_t: Block = std::array::from_fn(|v| std::array::from_fn(|u| q[u * 8 + v]));
+    (q_t, q_t.map(|row| row.map(|v| 1.0 / v)))
+}
+
 /// C-A4 jpeg_compression: the lossy part of baseline JPEG at the severity's quality, as libjpeg
 /// does it for OpenCV's `imencode`: RGB to YCbCr (JFIF), 4:2:0 chroma subsampling (2x2 average),
 /// 8x8 DCT of each plane (edges padded by replication), quantisation with the Annex K tables scaled
@@ -309,8 +315,10 @@ fn scaled_table(base: &[u16; 64], quality: u8) -> [f32; 64] {
 /// colour bleeding are those of the real codec, at a fraction of the cost. Mono8 is a single luma
 /// plane. Deterministic (no random draw).
 pub struct JpegCompression {
-    luma_q: [f32; 64],
-    chroma_q: [f32; 64],
+    /// Luma and chroma quantisation steps, each as (table, reciprocals), transposed: the
+    /// coefficients come out of the forward pass transposed.
+    luma_q: (Block, Block),
+    chroma_q: (Block, Block),
     /// Orthonormal DCT-II matrix: `m[u][x] = c(u)/2 cos((2x+1)u pi/16)` (its transpose is the
     /// inverse transform).
     m: Block,
@@ -404,8 +412,8 @@ pub const JPEG: CameraBuilder = |s| {
         }
     }
     Ok(Box::new(JpegCompression {
-        luma_q: scaled_table(&LUMA_Q, q),
-        chroma_q: scaled_table(&CHROMA_Q, q),
+        luma_q: transposed_steps(&scaled_table(&LUMA_Q, q)),
+        chroma_q: transposed_steps(&scaled_table(&CHROMA_Q, q)),
         m,
     }))
 };
@@ -451,16 +459,13 @@ impl Plane {
 impl JpegCompression {
     /// DCT, quantise, dequantise, inverse DCT of every 8x8 block of `p` (level-shifted by 128),
     /// in place, in parallel over block rows.
-    fn roundtrip_plane(&self, p: &mut Plane, q: &[f32; 64]) {
+    fn roundtrip_plane(&self, p: &mut Plane, (q_t, qinv_t): &(Block, Block)) {
         use rayon::prelude::*;
         let pw = p.w;
         let m = &self.m;
-        // The tables transposed, as the coefficients come out of the forward pass.
-        let q_t: Block = std::array::from_fn(|v| std::array::from_fn(|u| q[u * 8 + v]));
-        let qinv_t = q_t.map(|row| row.map(|v| 1.0 / v));
         p.data
             .par_chunks_mut(pw * 8)
-            .for_each(|band| roundtrip_band(m, &q_t, &qinv_t, pw, band));
+            .for_each(|band| roundtrip_band(m, q_t, qinv_t, pw, band));
     }
 }
 

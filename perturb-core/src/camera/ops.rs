@@ -1094,14 +1094,7 @@ mod tests {
 
     #[test]
     fn split_and_merge_rgb_follow_each_formats_channel_positions() {
-        let rgb = Image::from_vec(
-            (0..5 * 3).map(|i| (i * 53 % 256) as u8).collect(),
-            5,
-            1,
-            15,
-            PixelFormat::Rgb8,
-        )
-        .unwrap();
+        let rgb = crate::image::rgb_test_row(5, 53);
         for format in PixelFormat::ALL {
             let img = rgb.convert(format);
             let mut planes = [[0f32; 5]; 3];
@@ -1162,23 +1155,19 @@ mod tests {
         }
         // Every other format gives the same pixels, alpha copied.
         for format in PixelFormat::ALL.into_iter().filter(|f| !f.is_mono()) {
-            let mut src = img.convert(format);
-            if let Some(a) = format.alpha_offset() {
-                let c = format.channels();
-                src.data.iter_mut().skip(a).step_by(c).for_each(|v| *v = 77);
-            }
+            // The image in `format` with alpha 77.
+            let in_format = |img: &Image| {
+                let mut i = img.convert(format);
+                if let Some(a) = format.alpha_offset() {
+                    let c = format.channels();
+                    i.data.iter_mut().skip(a).step_by(c).for_each(|v| *v = 77);
+                }
+                i
+            };
+            let src = in_format(&img);
             let mut got = Image::new(w, 1, format);
             map_value(&src.view(), &mut got.view_mut(), |_, _, v| nv(v));
-            let mut want = out.convert(format);
-            if let Some(a) = format.alpha_offset() {
-                let c = format.channels();
-                want.data
-                    .iter_mut()
-                    .skip(a)
-                    .step_by(c)
-                    .for_each(|v| *v = 77);
-            }
-            assert_eq!(got, want, "{format:?}");
+            assert_eq!(got, in_format(&out), "{format:?}");
         }
     }
 
