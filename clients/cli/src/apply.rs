@@ -2,8 +2,8 @@
 
 use crate::files::{Loaded, load, save_cloud, save_image, sensor_for};
 use anyhow::{Context, Result, bail};
-use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string};
-use perturb_bag::{Bag, BagWriter, Filter, SensorMessage, WriterOptions};
+use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string_for};
+use perturb_bag::{AnyWriter, Bag, BagFormat, Filter, SensorMessage};
 use perturb_core::formats::ros::{CompressedImageMsg, Header, ImageMsg, PointCloud2Msg};
 use perturb_core::formats::{FileKind, picture};
 use perturb_core::image::Image;
@@ -19,9 +19,12 @@ use std::path::PathBuf;
   perturb apply --id C-C7 --severity 3 frame.png -o rainy.png
   perturb apply --id L-A9 --severity 2 --seed 7 scan.bin -o foggy.bin
   perturb apply --id C-A1 --severity 1 recording.mcap -o perturbed_bag --topic /camera/image_raw
+  perturb apply --id L-B1 --severity 2 drive.bag -o perturbed.bag
 
 The output keeps the input's format and layout (PNG stays PNG, a PCD keeps its fields and DATA
-encoding, a bag keeps every topic; messages of the other modality are copied unchanged). For a
+encoding, a bag keeps every topic; messages of the other modality are copied unchanged). A ROS 1
+input (.bag, or ROS 1 profile MCAP) gives a ROS 1 .bag: OUT if it ends in .bag, else OUT/OUT.bag;
+a rosbag2 input gives a rosbag2 bag directory. For a
 bag, the sequence number of a message is its index on its topic plus --seq, and a
 /perturb/events topic records which perturbation was applied to each frame.")]
 pub struct Args {
@@ -46,7 +49,7 @@ pub struct Args {
     /// For bags: only perturb these topics (repeatable; default all topics of the perturbation's modality).
     #[arg(long)]
     topic: Vec<String>,
-    /// Input: .png .jpg .bin (KITTI) .pcd.bin (nuScenes) .pcd, or a rosbag2 .mcap file or directory.
+    /// Input: .png .jpg .bin (KITTI) .pcd.bin (nuScenes) .pcd, a rosbag2 .mcap file or directory, or a ROS 1 .bag.
     input: PathBuf,
     /// Output file (same format as the input), or for a bag the output bag directory.
     #[arg(short, long)]
@@ -123,9 +126,10 @@ fn apply_bag(a: &Args, spec: Spec) -> Result<()> {
     Ok(())
 }
 
-/// Writes a copy of `bag` into the bag directory `out` with every message of the perturbation's
-/// modality (on `topics`, or all topics when empty) perturbed, the others copied, and a
-/// /perturb/events record per perturbed frame. The sequence number of a message is its index on its
+/// Writes a copy of `bag` into the bag `out`, in the input's format (rosbag2 MCAP, or a ROS 1
+/// `.bag` for ROS 1 inputs), with every message of the perturbation's modality (on `topics`, or
+/// all topics when empty) perturbed, the others copied, and a /perturb/events record per
+/// perturbed frame. The sequence number of a message is its index on its
 /// topic plus `seq_offset`. Returns the number of input messages; damage in the input is an error
 /// after the readable messages were written. `tick` is called once per input message.
 #[allow(clippy::too_many_arguments)]
@@ -139,16 +143,16 @@ pub fn perturb_bag(
     quiet: bool,
     tick: &(dyn Fn() + Sync),
 ) -> Result<u64> {
-    let mut w = BagWriter::create(out, &WriterOptions::default())?;
+    let topics_in = bag.topics()?;
+    let format = if bag.is_ros1_bag() || topics_in.iter().any(|t| t.message_encoding == "ros1") {
+        BagFormat::Ros1
+    } else {
+        BagFormat::Rosbag2
+    };
+    let mut w = AnyWriter::create(out, format, None)?;
     let mut channel = HashMap::new();
-    for t in &bag.topics()? {
-        let id = w.add_topic_with_schema(
-            &t.topic,
-            &t.type_name,
-            &t.schema_encoding,
-            &t.schema,
-            t.metadata.clone(),
-        )?;
+    for t in &topics_in {
+        let id = w.add_topic_like(t)?;
         channel.insert(t.topic.clone(), id);
     }
     let events = w.add_topic(EVENTS_TOPIC, EVENTS_TYPE)?;
@@ -173,14 +177,15 @@ pub fn perturb_bag(
                 let seq = *k + seq_offset;
                 *k += 1;
                 let out =
-                    perturb_message(&msg, seq, camera.as_mut(), lidar.as_mut()).map_err(|e| {
-                        perturb_bag::BagError::Callback(format!(
-                            "{}: `{}` at log time {}: {e:#}",
-                            m.path.display(),
-                            m.topic,
-                            m.log_time
-                        ))
-                    })?;
+                    perturb_message(&msg, seq, m.header_seq(), camera.as_mut(), lidar.as_mut())
+                        .map_err(|e| {
+                            perturb_bag::BagError::Callback(format!(
+                                "{}: `{}` at log time {}: {e:#}",
+                                m.path.display(),
+                                m.topic,
+                                m.log_time
+                            ))
+                        })?;
                 match out {
                     Some((bytes, h)) => (bytes, Some((h, seq))),
                     None => (m.data.to_vec(), None),
@@ -204,7 +209,12 @@ pub fn perturb_bag(
                 seed: Some(spec.seed),
             };
             let json = serde_json::to_string(&ev).expect("event serialises");
-            w.write(events, m.log_time, m.publish_time, &encode_string(&json))?;
+            w.write(
+                events,
+                m.log_time,
+                m.publish_time,
+                &encode_string_for(format, &json),
+            )?;
         }
         Ok(ControlFlow::Continue(()))
     })?;
@@ -238,10 +248,12 @@ pub fn perturb_bag(
 type HeaderOut = (i32, u32, String);
 
 /// Perturbs one decoded sensor message if it belongs to the perturbation's modality; returns the
-/// re-encoded message and its header, or None to copy it unchanged.
+/// re-encoded message (in ROS 1 serialization with its header `seq` when `ros1_seq` is given,
+/// else CDR) and its header, or None to copy it unchanged.
 fn perturb_message(
     msg: &SensorMessage<'_>,
     seq: u64,
+    ros1_seq: Option<u32>,
     camera: Option<&mut CameraPerturber>,
     lidar: Option<&mut LidarPerturber>,
 ) -> Result<Option<(Vec<u8>, HeaderOut)>> {
@@ -258,7 +270,8 @@ fn perturb_message(
             )?;
             cam.apply(&view, &mut out.view_mut(), seq)?;
             let m = ImageMsg::from_view(img.header, &out.view());
-            Ok(Some((m.encode(), hdr(&img.header))))
+            let bytes = ros1_seq.map_or_else(|| m.encode(), |s| m.encode_ros1(s));
+            Ok(Some((bytes, hdr(&img.header))))
         }
         (SensorMessage::Compressed(c), Some(cam), _) => {
             let decoded = picture::decode(c.data)?;
@@ -273,13 +286,15 @@ fn perturb_message(
                 format: c.format,
                 data: &data,
             };
-            Ok(Some((m.encode(), hdr(&c.header))))
+            let bytes = ros1_seq.map_or_else(|| m.encode(), |s| m.encode_ros1(s));
+            Ok(Some((bytes, hdr(&c.header))))
         }
         (SensorMessage::Cloud(pc), _, Some(lid)) => {
             let view = pc.view()?;
             let out = lid.apply_owned(&view, seq, None)?;
             let m = PointCloud2Msg::from_view(pc.header, &out.view());
-            Ok(Some((m.encode(), hdr(&pc.header))))
+            let bytes = ros1_seq.map_or_else(|| m.encode(), |s| m.encode_ros1(s));
+            Ok(Some((bytes, hdr(&pc.header))))
         }
         _ => Ok(None),
     }

@@ -48,8 +48,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     let bag = Bag::open(&a.input)?;
     println!(
-        "bag {} ({})",
+        "bag {} ({}, {})",
         a.input.display(),
+        bag.format_name(),
         if bag.is_indexed() {
             "indexed"
         } else {

@@ -190,7 +190,7 @@ fn detect_bag(path: &Path, cfg: &EvalConfig, pb: &ProgressBar) -> Result<FrameBo
         ..Filter::default()
     };
     let report = bag.for_each(&filter, |m| {
-        if m.type_name != "sensor_msgs/msg/PointCloud2" {
+        if perturb_bag::SensorType::of(m.type_name) != Some(perturb_bag::SensorType::PointCloud2) {
             return Ok(ControlFlow::Continue(()));
         }
         let Some(Ok(SensorMessage::Cloud(pc))) = m.decode() else {
