@@ -242,13 +242,17 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
     assert!(wait_for(Duration::from_secs(15), || log_of(&ns, "bridge.log").contains("waiting for the ROS master")));
     assert!(bridge.try_wait().unwrap().is_none(), "the bridge gave up:\n{}", log_of(&ns, "bridge.log"));
     master.up();
-    let registered = || rostopic_list(&master, "-p").contains("/relayed/camera");
-    assert!(wait_for(Duration::from_secs(15), registered), "{}", log_of(&ns, "bridge.log"));
-    let relay = |name: &str, base: &str, subs: &mut Vec<Child>| -> (Vec<Value>, Vec<Value>) {
-        let mut sub = ros1_peer(&master, &["sub", "--topic", "/relayed/camera", "--type", "image", "--count", "5", "--timeout", "30", "--name", name]);
+    let registered = |m: &Ros1Master| rostopic_list(m, "-p").contains("/relayed/camera");
+    assert!(
+        wait_for(Duration::from_secs(15), || registered(&master)),
+        "{}",
+        log_of(&ns, "bridge.log")
+    );
+    let relay = |master: &Ros1Master, name: &str, base: &str, subs: &mut Vec<Child>| -> (Vec<Value>, Vec<Value>) {
+        let mut sub = ros1_peer(master, &["sub", "--topic", "/relayed/camera", "--type", "image", "--count", "5", "--timeout", "30", "--name", name]);
         let r = ros1_ready(&mut sub);
         std::thread::sleep(Duration::from_millis(800));
-        let mut p = ros1_peer(&master, &["pub", "--topic", "/sensors/camera/image_raw", "--type", "image", "--count", "5", "--rate", "10", "--name", name, "--stamp-base", base]);
+        let mut p = ros1_peer(master, &["pub", "--topic", "/sensors/camera/image_raw", "--type", "image", "--count", "5", "--rate", "10", "--name", name, "--stamp-base", base]);
         let out = p.stdout.take().unwrap();
         let sent = ros1_lines(std::io::BufReader::new(out), &mut p);
         let got = ros1_lines(r, &mut sub);
@@ -256,7 +260,7 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
         (sent, got)
     };
     let mut done = Vec::new();
-    let (sent, got) = relay("before", "1000", &mut done);
+    let (sent, got) = relay(&master, "before", "1000", &mut done);
     assert_eq!(got.len(), 5, "frames before the restart:\n{}", log_of(&ns, "bridge.log"));
     for (g, s) in got.iter().zip(&sent) {
         headers_equal(g, s);
@@ -266,13 +270,13 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
     master.down();
     master.up();
     assert!(
-        wait_for(Duration::from_secs(20), registered),
+        wait_for(Duration::from_secs(20), || registered(&master)),
         "the bridge did not register again:\n{}",
         log_of(&ns, "bridge.log")
     );
     assert!(log_of(&ns, "bridge.log").contains("registering again") || log_of(&ns, "bridge.log").contains("lost the ROS master"));
     // New nodes, known only to the new master, reach the bridge and are reached by it.
-    let (sent, got) = relay("after", "2000", &mut done);
+    let (sent, got) = relay(&master, "after", "2000", &mut done);
     assert_eq!(got.len(), 5, "frames after the restart:\n{}", log_of(&ns, "bridge.log"));
     for (g, s) in got.iter().zip(&sent) {
         headers_equal(g, s);
