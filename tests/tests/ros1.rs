@@ -152,7 +152,9 @@ fn ros1_sensors_through_perturbd_to_rospy_exact_headers_and_a_bag1_recording() {
     assert_eq!(got_lid[0]["fields"], serde_json::json!(["x", "y", "z", "intensity"]));
 
     // rostopic hz and echo on an egress topic while frames flow at 10 Hz.
-    let mut feed = ros1_peer(&master, &["pub", "--topic", "/sensors/camera/image_raw", "--type", "image", "--count", "60", "--rate", "10", "--size", "96x64", "--name", "feed", "--stamp-base", "1700000000"]);
+    let mut feed = ros1_peer(&master, &["pub", "--topic", "/sensors/camera/image_raw", "--type", "image", "--count", "60", "--rate", "10", "--size", "96x64", "--frame-id", "camera_front", "--name", "feed", "--stamp-base", "1700000000"]);
+    let feed_out = feed.stdout.take().unwrap();
+    let drain = std::thread::spawn(move || std::io::copy(&mut { feed_out }, &mut std::io::sink()));
     let echo = master
         .command("rostopic")
         .args(["echo", "-n1", "/perturbed/camera/image_raw/header"])
@@ -181,6 +183,7 @@ fn ros1_sensors_through_perturbd_to_rospy_exact_headers_and_a_bag1_recording() {
     assert!((8.0..=12.0).contains(&rate), "egress at {rate} Hz, published at 10 Hz:\n{text}");
     let _ = feed.kill();
     let _ = feed.wait();
+    let _ = drain.join();
 
     assert!(interrupt(&mut bridge), "the bridge did not stop cleanly:\n{}", log_of(&ns, "bridge.log"));
     let report = daemon.stop();
