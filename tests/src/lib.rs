@@ -532,7 +532,10 @@ pub fn ros1_ready(child: &mut Child) -> BufReader<std::process::ChildStdout> {
     let mut r = BufReader::new(child.stdout.take().expect("piped stdout"));
     let mut line = String::new();
     r.read_line(&mut line).expect("peer output");
-    assert!(line.contains("ready"), "the rospy subscriber did not start: {line}");
+    assert!(
+        line.contains("ready"),
+        "the rospy subscriber did not start: {line}"
+    );
     r
 }
 

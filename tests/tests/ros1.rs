@@ -72,13 +72,20 @@ fn wait_for(timeout: Duration, mut f: impl FnMut() -> bool) -> bool {
 
 /// The topics the master lists with publishers / subscribers (`rostopic list -p` / `-s`).
 fn rostopic_list(master: &Ros1Master, flag: &str) -> String {
-    let o = master.command("rostopic").args(["list", flag]).output().unwrap();
+    let o = master
+        .command("rostopic")
+        .args(["list", flag])
+        .output()
+        .unwrap();
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 fn headers_equal(got: &Value, sent: &Value) {
     for k in ["seq", "sec", "nsec", "frame_id", "width", "height"] {
-        assert_eq!(got[k], sent[k], "header/geometry `{k}` must pass exactly: {got} vs {sent}");
+        assert_eq!(
+            got[k], sent[k],
+            "header/geometry `{k}` must pass exactly: {got} vs {sent}"
+        );
     }
 }
 
@@ -127,14 +134,84 @@ fn ros1_sensors_through_perturbd_to_rospy_exact_headers_and_a_bag1_recording() {
     );
     const N: usize = 10;
     let n = N.to_string();
-    let mut sub_cam = ros1_peer(&master, &["sub", "--topic", "/perturbed/camera/image_raw", "--type", "image", "--count", &n, "--timeout", "40", "--name", "cam"]);
-    let mut sub_lid = ros1_peer(&master, &["sub", "--topic", "/perturbed/lidar/points", "--type", "cloud", "--count", &n, "--timeout", "40", "--name", "lid"]);
+    let mut sub_cam = ros1_peer(
+        &master,
+        &[
+            "sub",
+            "--topic",
+            "/perturbed/camera/image_raw",
+            "--type",
+            "image",
+            "--count",
+            &n,
+            "--timeout",
+            "40",
+            "--name",
+            "cam",
+        ],
+    );
+    let mut sub_lid = ros1_peer(
+        &master,
+        &[
+            "sub",
+            "--topic",
+            "/perturbed/lidar/points",
+            "--type",
+            "cloud",
+            "--count",
+            &n,
+            "--timeout",
+            "40",
+            "--name",
+            "lid",
+        ],
+    );
     let r_cam = ros1_ready(&mut sub_cam);
     let r_lid = ros1_ready(&mut sub_lid);
     // The subscribers are connected to the bridge before anything is published.
     std::thread::sleep(Duration::from_secs(1));
-    let mut pub_cam = ros1_peer(&master, &["pub", "--topic", "/sensors/camera/image_raw", "--type", "image", "--count", &n, "--rate", "10", "--size", "96x64", "--frame-id", "camera_front", "--name", "cam"]);
-    let mut pub_lid = ros1_peer(&master, &["pub", "--topic", "/sensors/lidar/points", "--type", "cloud", "--count", &n, "--rate", "10", "--points", "800", "--frame-id", "lidar_top", "--name", "lid", "--stamp-base", "1500000000"]);
+    let mut pub_cam = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/sensors/camera/image_raw",
+            "--type",
+            "image",
+            "--count",
+            &n,
+            "--rate",
+            "10",
+            "--size",
+            "96x64",
+            "--frame-id",
+            "camera_front",
+            "--name",
+            "cam",
+        ],
+    );
+    let mut pub_lid = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/sensors/lidar/points",
+            "--type",
+            "cloud",
+            "--count",
+            &n,
+            "--rate",
+            "10",
+            "--points",
+            "800",
+            "--frame-id",
+            "lidar_top",
+            "--name",
+            "lid",
+            "--stamp-base",
+            "1500000000",
+        ],
+    );
     let out_cam = pub_cam.stdout.take().unwrap();
     let out_lid = pub_lid.stdout.take().unwrap();
     let sent_cam = ros1_lines(std::io::BufReader::new(out_cam), &mut pub_cam);
@@ -142,17 +219,55 @@ fn ros1_sensors_through_perturbd_to_rospy_exact_headers_and_a_bag1_recording() {
     let got_cam = ros1_lines(r_cam, &mut sub_cam);
     let got_lid = ros1_lines(r_lid, &mut sub_lid);
     assert_eq!(sent_cam.len(), N, "the camera publisher did not publish");
-    assert_eq!(got_cam.len(), N, "camera frames lost:\n{}", log_of(&ns, "bridge.log"));
-    assert_eq!(got_lid.len(), N, "cloud frames lost:\n{}", log_of(&ns, "bridge.log"));
-    for (got, sent) in got_cam.iter().zip(&sent_cam).chain(got_lid.iter().zip(&sent_lid)) {
+    assert_eq!(
+        got_cam.len(),
+        N,
+        "camera frames lost:\n{}",
+        log_of(&ns, "bridge.log")
+    );
+    assert_eq!(
+        got_lid.len(),
+        N,
+        "cloud frames lost:\n{}",
+        log_of(&ns, "bridge.log")
+    );
+    for (got, sent) in got_cam
+        .iter()
+        .zip(&sent_cam)
+        .chain(got_lid.iter().zip(&sent_lid))
+    {
         headers_equal(got, sent);
         assert_ne!(got["sha256"], sent["sha256"], "the frame was not perturbed");
     }
     assert_eq!(got_cam[0]["encoding"], "rgb8");
-    assert_eq!(got_lid[0]["fields"], serde_json::json!(["x", "y", "z", "intensity"]));
+    assert_eq!(
+        got_lid[0]["fields"],
+        serde_json::json!(["x", "y", "z", "intensity"])
+    );
 
     // rostopic hz and echo on an egress topic while frames flow at 10 Hz.
-    let mut feed = ros1_peer(&master, &["pub", "--topic", "/sensors/camera/image_raw", "--type", "image", "--count", "60", "--rate", "10", "--size", "96x64", "--frame-id", "camera_front", "--name", "feed", "--stamp-base", "1700000000"]);
+    let mut feed = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/sensors/camera/image_raw",
+            "--type",
+            "image",
+            "--count",
+            "60",
+            "--rate",
+            "10",
+            "--size",
+            "96x64",
+            "--frame-id",
+            "camera_front",
+            "--name",
+            "feed",
+            "--stamp-base",
+            "1700000000",
+        ],
+    );
     let feed_out = feed.stdout.take().unwrap();
     let drain = std::thread::spawn(move || std::io::copy(&mut { feed_out }, &mut std::io::sink()));
     let echo = master
@@ -161,7 +276,10 @@ fn ros1_sensors_through_perturbd_to_rospy_exact_headers_and_a_bag1_recording() {
         .output()
         .unwrap();
     let echo = String::from_utf8_lossy(&echo.stdout).into_owned();
-    assert!(echo.contains("frame_id: \"camera_front\"") || echo.contains("frame_id: camera_front"), "rostopic echo: {echo}");
+    assert!(
+        echo.contains("frame_id: \"camera_front\"") || echo.contains("frame_id: camera_front"),
+        "rostopic echo: {echo}"
+    );
     assert!(echo.contains("secs: 17000000"), "rostopic echo: {echo}");
     let mut hz = master
         .command("rostopic")
@@ -179,23 +297,46 @@ fn ros1_sensors_through_perturbd_to_rospy_exact_headers_and_a_bag1_recording() {
         .filter_map(|l| l.trim().strip_prefix("average rate: "))
         .filter_map(|v| v.trim().parse().ok())
         .collect();
-    let rate = *rates.last().unwrap_or_else(|| panic!("rostopic hz printed no rate: {text}"));
-    assert!((8.0..=12.0).contains(&rate), "egress at {rate} Hz, published at 10 Hz:\n{text}");
+    let rate = *rates
+        .last()
+        .unwrap_or_else(|| panic!("rostopic hz printed no rate: {text}"));
+    assert!(
+        (8.0..=12.0).contains(&rate),
+        "egress at {rate} Hz, published at 10 Hz:\n{text}"
+    );
     let _ = feed.kill();
     let _ = feed.wait();
     let _ = drain.join();
 
-    assert!(interrupt(&mut bridge), "the bridge did not stop cleanly:\n{}", log_of(&ns, "bridge.log"));
+    assert!(
+        interrupt(&mut bridge),
+        "the bridge did not stop cleanly:\n{}",
+        log_of(&ns, "bridge.log")
+    );
     let report = daemon.stop();
     for s in report["streams"].as_array().unwrap() {
         assert_eq!(s["invalid"], 0, "{s}");
     }
 
     // The ROS 1 bag: rosbag info, Python rosbag, rosbags.
-    let info = master.command("rosbag").arg("info").arg(&bag).output().unwrap();
+    let info = master
+        .command("rosbag")
+        .arg("info")
+        .arg(&bag)
+        .output()
+        .unwrap();
     let info_text = String::from_utf8_lossy(&info.stdout);
-    assert!(info.status.success(), "rosbag info: {}", String::from_utf8_lossy(&info.stderr));
-    for t in ["/camera/raw", "/camera/perturbed", "/lidar/perturbed", "/perturb/events"] {
+    assert!(
+        info.status.success(),
+        "rosbag info: {}",
+        String::from_utf8_lossy(&info.stderr)
+    );
+    for t in [
+        "/camera/raw",
+        "/camera/perturbed",
+        "/lidar/perturbed",
+        "/perturb/events",
+    ] {
         assert!(info_text.contains(t), "rosbag info lacks {t}:\n{info_text}");
     }
     let py = master
@@ -207,16 +348,42 @@ fn ros1_sensors_through_perturbd_to_rospy_exact_headers_and_a_bag1_recording() {
         .arg(&bag)
         .output()
         .unwrap();
-    assert!(py.status.success(), "python rosbag: {}", String::from_utf8_lossy(&py.stderr));
-    let seqs: Vec<String> = String::from_utf8_lossy(&py.stdout).lines().map(str::to_string).collect();
+    assert!(
+        py.status.success(),
+        "python rosbag: {}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let seqs: Vec<String> = String::from_utf8_lossy(&py.stdout)
+        .lines()
+        .map(str::to_string)
+        .collect();
     let first = format!("{} {} 96", sent_cam[0]["seq"], sent_cam[0]["sec"]);
-    assert_eq!(seqs.first(), Some(&first), "the bag's header seq is the ROS 1 seq: {seqs:?}");
+    assert_eq!(
+        seqs.first(),
+        Some(&first),
+        "the bag's header seq is the ROS 1 seq: {seqs:?}"
+    );
     let msgs = read_bag(&bag);
-    let perturbed: Vec<&Value> = msgs.iter().filter(|m| m["topic"] == "/camera/perturbed").collect();
-    assert!(perturbed.len() >= N, "rosbags read {} perturbed frames", perturbed.len());
+    let perturbed: Vec<&Value> = msgs
+        .iter()
+        .filter(|m| m["topic"] == "/camera/perturbed")
+        .collect();
+    assert!(
+        perturbed.len() >= N,
+        "rosbags read {} perturbed frames",
+        perturbed.len()
+    );
     let ev = events(&msgs);
-    assert!(ev.iter().any(|e| e["id"] == "C-A1" && e["severity"] == 3 && e["stream"] == "camera"), "{ev:?}");
-    assert!(ev.iter().any(|e| e["id"] == "L-C1" && e["stream"] == "lidar"), "{ev:?}");
+    assert!(
+        ev.iter()
+            .any(|e| e["id"] == "C-A1" && e["severity"] == 3 && e["stream"] == "camera"),
+        "{ev:?}"
+    );
+    assert!(
+        ev.iter()
+            .any(|e| e["id"] == "L-C1" && e["stream"] == "lidar"),
+        "{ev:?}"
+    );
     let first_ev = ev.iter().find(|e| e["stream"] == "camera").unwrap();
     assert_eq!(first_ev["seq"], sent_cam[0]["seq"]);
 }
@@ -242,8 +409,16 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
     .unwrap();
     // The bridge starts first and waits for its master.
     let mut bridge = start_bridge(&ns, &master, &cfg, "bridge.log");
-    assert!(wait_for(Duration::from_secs(15), || log_of(&ns, "bridge.log").contains("waiting for the ROS master")));
-    assert!(bridge.try_wait().unwrap().is_none(), "the bridge gave up:\n{}", log_of(&ns, "bridge.log"));
+    assert!(wait_for(Duration::from_secs(15), || log_of(
+        &ns,
+        "bridge.log"
+    )
+    .contains("waiting for the ROS master")));
+    assert!(
+        bridge.try_wait().unwrap().is_none(),
+        "the bridge gave up:\n{}",
+        log_of(&ns, "bridge.log")
+    );
     master.up();
     let registered = |m: &Ros1Master| rostopic_list(m, "-p").contains("/relayed/camera");
     assert!(
@@ -251,11 +426,47 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
         "{}",
         log_of(&ns, "bridge.log")
     );
-    let relay = |master: &Ros1Master, name: &str, base: &str, subs: &mut Vec<Child>| -> (Vec<Value>, Vec<Value>) {
-        let mut sub = ros1_peer(master, &["sub", "--topic", "/relayed/camera", "--type", "image", "--count", "5", "--timeout", "30", "--name", name]);
+    let relay = |master: &Ros1Master,
+                 name: &str,
+                 base: &str,
+                 subs: &mut Vec<Child>|
+     -> (Vec<Value>, Vec<Value>) {
+        let mut sub = ros1_peer(
+            master,
+            &[
+                "sub",
+                "--topic",
+                "/relayed/camera",
+                "--type",
+                "image",
+                "--count",
+                "5",
+                "--timeout",
+                "30",
+                "--name",
+                name,
+            ],
+        );
         let r = ros1_ready(&mut sub);
         std::thread::sleep(Duration::from_millis(800));
-        let mut p = ros1_peer(master, &["pub", "--topic", "/sensors/camera/image_raw", "--type", "image", "--count", "5", "--rate", "10", "--name", name, "--stamp-base", base]);
+        let mut p = ros1_peer(
+            master,
+            &[
+                "pub",
+                "--topic",
+                "/sensors/camera/image_raw",
+                "--type",
+                "image",
+                "--count",
+                "5",
+                "--rate",
+                "10",
+                "--name",
+                name,
+                "--stamp-base",
+                base,
+            ],
+        );
         let out = p.stdout.take().unwrap();
         let sent = ros1_lines(std::io::BufReader::new(out), &mut p);
         let got = ros1_lines(r, &mut sub);
@@ -264,7 +475,12 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
     };
     let mut done = Vec::new();
     let (sent, got) = relay(&master, "before", "1000", &mut done);
-    assert_eq!(got.len(), 5, "frames before the restart:\n{}", log_of(&ns, "bridge.log"));
+    assert_eq!(
+        got.len(),
+        5,
+        "frames before the restart:\n{}",
+        log_of(&ns, "bridge.log")
+    );
     for (g, s) in got.iter().zip(&sent) {
         headers_equal(g, s);
         assert_eq!(g["sha256"], s["sha256"], "the local bus relays unperturbed");
@@ -277,19 +493,41 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
         "the bridge did not register again:\n{}",
         log_of(&ns, "bridge.log")
     );
-    assert!(log_of(&ns, "bridge.log").contains("registering again") || log_of(&ns, "bridge.log").contains("lost the ROS master"));
+    assert!(
+        log_of(&ns, "bridge.log").contains("registering again")
+            || log_of(&ns, "bridge.log").contains("lost the ROS master")
+    );
     // New nodes, known only to the new master, reach the bridge and are reached by it.
     let (sent, got) = relay(&master, "after", "2000", &mut done);
-    assert_eq!(got.len(), 5, "frames after the restart:\n{}", log_of(&ns, "bridge.log"));
+    assert_eq!(
+        got.len(),
+        5,
+        "frames after the restart:\n{}",
+        log_of(&ns, "bridge.log")
+    );
     for (g, s) in got.iter().zip(&sent) {
         headers_equal(g, s);
     }
     assert!(interrupt(&mut bridge), "{}", log_of(&ns, "bridge.log"));
     let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    let ingress = rep.as_array().unwrap().iter().find(|r| r["name"].as_str().unwrap().starts_with("ingress")).unwrap();
-    let egress = rep.as_array().unwrap().iter().find(|r| r["name"].as_str().unwrap().starts_with("egress")).unwrap();
+    let ingress = rep
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["name"].as_str().unwrap().starts_with("ingress"))
+        .unwrap();
+    let egress = rep
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["name"].as_str().unwrap().starts_with("egress"))
+        .unwrap();
     // Every frame published was relayed or counted as lost.
-    assert_eq!(ingress["received"].as_u64().unwrap() + ingress["lost"].as_u64().unwrap(), 10, "{ingress}");
+    assert_eq!(
+        ingress["received"].as_u64().unwrap() + ingress["lost"].as_u64().unwrap(),
+        10,
+        "{ingress}"
+    );
     assert_eq!(egress["forwarded"], 10, "{egress}");
 }
 
@@ -311,8 +549,38 @@ fn ros1_rosbag_record_bag_replays_through_perturbd_with_clock() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let mut p1 = ros1_peer(&master, &["pub", "--topic", "/sensors/camera/image_raw", "--type", "image", "--count", "6", "--rate", "10", "--name", "c"]);
-    let mut p2 = ros1_peer(&master, &["pub", "--topic", "/sensors/lidar/points", "--type", "cloud", "--count", "6", "--rate", "10", "--name", "l"]);
+    let mut p1 = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/sensors/camera/image_raw",
+            "--type",
+            "image",
+            "--count",
+            "6",
+            "--rate",
+            "10",
+            "--name",
+            "c",
+        ],
+    );
+    let mut p2 = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/sensors/lidar/points",
+            "--type",
+            "cloud",
+            "--count",
+            "6",
+            "--rate",
+            "10",
+            "--name",
+            "l",
+        ],
+    );
     let o1 = p1.stdout.take().unwrap();
     let o2 = p2.stdout.take().unwrap();
     let sent_cam = ros1_lines(std::io::BufReader::new(o1), &mut p1);
@@ -320,7 +588,10 @@ fn ros1_rosbag_record_bag_replays_through_perturbd_with_clock() {
     assert_eq!((sent_cam.len(), sent_lid.len()), (6, 6));
     std::thread::sleep(Duration::from_millis(500));
     interrupt(&mut recorder);
-    assert!(wait_for(Duration::from_secs(10), || rec.exists()), "rosbag record wrote no bag");
+    assert!(
+        wait_for(Duration::from_secs(10), || rec.exists()),
+        "rosbag record wrote no bag"
+    );
 
     let daemon_cfg = ns.dir.join("perturbd.toml");
     std::fs::write(
@@ -343,7 +614,22 @@ fn ros1_rosbag_record_bag_replays_through_perturbd_with_clock() {
     )
     .unwrap();
     let mut daemon = ns.start_daemon(&daemon_cfg);
-    let mut clock = ros1_peer(&master, &["sub", "--topic", "/clock", "--type", "clock", "--count", "5", "--timeout", "30", "--name", "clock"]);
+    let mut clock = ros1_peer(
+        &master,
+        &[
+            "sub",
+            "--topic",
+            "/clock",
+            "--type",
+            "clock",
+            "--count",
+            "5",
+            "--timeout",
+            "30",
+            "--name",
+            "clock",
+        ],
+    );
     let clock_r = ros1_ready(&mut clock);
     let mut bridge = start_bridge(&ns, &master, &cfg, "bridge.log");
     let ticks = ros1_lines(clock_r, &mut clock);
@@ -352,14 +638,30 @@ fn ros1_rosbag_record_bag_replays_through_perturbd_with_clock() {
     daemon.stop();
     assert!(ticks.len() >= 5, "/clock: {ticks:?}");
     let t0 = ticks[0]["clock_ns"].as_u64().unwrap();
-    assert!(ticks.windows(2).all(|w| w[1]["clock_ns"].as_u64() >= w[0]["clock_ns"].as_u64()));
+    assert!(
+        ticks
+            .windows(2)
+            .all(|w| w[1]["clock_ns"].as_u64() >= w[0]["clock_ns"].as_u64())
+    );
     // The recorded (arrival) times are wall-clock times of this run.
-    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos() as u64;
-    assert!(now - t0 < 120_000_000_000, "/clock is the bag's time: {t0} vs now {now}");
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64;
+    assert!(
+        now - t0 < 120_000_000_000,
+        "/clock is the bag's time: {t0} vs now {now}"
+    );
     let msgs = read_bag(&out);
     for (stream, sent) in [("cam", &sent_cam), ("lid", &sent_lid)] {
-        let raw: Vec<&Value> = msgs.iter().filter(|m| m["topic"] == format!("/{stream}/raw")).collect();
-        let pert: Vec<&Value> = msgs.iter().filter(|m| m["topic"] == format!("/{stream}/perturbed")).collect();
+        let raw: Vec<&Value> = msgs
+            .iter()
+            .filter(|m| m["topic"] == format!("/{stream}/raw"))
+            .collect();
+        let pert: Vec<&Value> = msgs
+            .iter()
+            .filter(|m| m["topic"] == format!("/{stream}/perturbed"))
+            .collect();
         assert_eq!(raw.len(), 6, "{stream}");
         assert_eq!(pert.len(), 6, "{stream}");
         for ((r, p), s) in raw.iter().zip(&pert).zip(sent.iter()) {
@@ -385,13 +687,34 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
     let node = Node::start(&settings(&master, "perturb_client_test")).unwrap();
     // Our publisher -> a rospy subscriber.
     let mut publisher = node.advertise("/ours/image", ros1::IMAGE).unwrap();
-    let mut sub = ros1_peer(&master, &["sub", "--topic", "/ours/image", "--type", "image", "--count", "3", "--timeout", "20", "--name", "o"]);
+    let mut sub = ros1_peer(
+        &master,
+        &[
+            "sub",
+            "--topic",
+            "/ours/image",
+            "--type",
+            "image",
+            "--count",
+            "3",
+            "--timeout",
+            "20",
+            "--name",
+            "o",
+        ],
+    );
     let r = ros1_ready(&mut sub);
-    assert!(wait_for(Duration::from_secs(15), || publisher.subscribers() == 1));
+    assert!(wait_for(Duration::from_secs(15), || publisher
+        .subscribers()
+        == 1));
     let pixels: Vec<u8> = (0..4 * 3 * 3).map(|i| i as u8).collect();
     for k in 0..3u32 {
         let m = ImageMsg {
-            header: Header { stamp_sec: 10 + k as i32, stamp_nanosec: 5, frame_id: "cam" },
+            header: Header {
+                stamp_sec: 10 + k as i32,
+                stamp_nanosec: 5,
+                frame_id: "cam",
+            },
             height: 3,
             width: 4,
             encoding: "rgb8",
@@ -400,12 +723,19 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
             data: &pixels,
         };
         let parts = m.ros1_parts(100 + k);
-        assert_eq!(publisher.publish(&[&parts.head, parts.data, &parts.tail]), 1);
+        assert_eq!(
+            publisher.publish(&[&parts.head, parts.data, &parts.tail]),
+            1
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     let got = ros1_lines(r, &mut sub);
     assert_eq!(got.len(), 3);
-    assert_eq!((got[2]["seq"].as_u64(), got[2]["sec"].as_u64()), (Some(102), Some(12)), "our seq reaches rospy");
+    assert_eq!(
+        (got[2]["seq"].as_u64(), got[2]["sec"].as_u64()),
+        (Some(102), Some(12)),
+        "our seq reaches rospy"
+    );
     // The subscriber left: the link goes, publishing carries on.
     assert!(wait_for(Duration::from_secs(10), || {
         publisher.publish(&[&[0u8; 4][..]]);
@@ -413,16 +743,39 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
     }));
 
     // A rospy publisher -> our subscriber, with rospy's seq.
-    let spec = TopicSpec { topic: "/theirs/points".into(), ros_type: RosType::PointCloud2, qos: Qos::default() };
+    let spec = TopicSpec {
+        topic: "/theirs/points".into(),
+        ros_type: RosType::PointCloud2,
+        qos: Qos::default(),
+    };
     let mut reader = TopicReader1::new(&node, &spec).unwrap();
-    let mut p = ros1_peer(&master, &["pub", "--topic", "/theirs/points", "--type", "cloud", "--count", "4", "--rate", "20", "--points", "50", "--name", "t"]);
+    let mut p = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/theirs/points",
+            "--type",
+            "cloud",
+            "--count",
+            "4",
+            "--rate",
+            "20",
+            "--points",
+            "50",
+            "--name",
+            "t",
+        ],
+    );
     let out = p.stdout.take().unwrap();
     let mut got = Vec::new();
     let t = Instant::now();
     while got.len() < 4 && t.elapsed() < Duration::from_secs(20) {
         reader
             .take(Duration::from_millis(100), &mut |seq, r| {
-                let perturb_bridge::dds::Received::Cloud(c) = r.unwrap() else { panic!("not a cloud") };
+                let perturb_bridge::dds::Received::Cloud(c) = r.unwrap() else {
+                    panic!("not a cloud")
+                };
                 got.push((seq.unwrap(), c.width, c.header.stamp_sec));
             })
             .unwrap();
@@ -448,21 +801,54 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_secs(3));
-    assert_eq!(publisher2.subscribers(), 0, "a subscriber of another type was accepted");
+    assert_eq!(
+        publisher2.subscribers(),
+        0,
+        "a subscriber of another type was accepted"
+    );
     let _ = wrong.wait();
-    let spec = TopicSpec { topic: "/theirs/typed".into(), ros_type: RosType::Image, qos: Qos::default() };
+    let spec = TopicSpec {
+        topic: "/theirs/typed".into(),
+        ros_type: RosType::Image,
+        qos: Qos::default(),
+    };
     let mut typed = TopicReader1::new(&node, &spec).unwrap();
-    let mut sp = ros1_peer(&master, &["pub", "--topic", "/theirs/typed", "--type", "string", "--count", "3", "--rate", "10", "--wait-subscribers", "0", "--linger", "2", "--name", "s"]);
+    let mut sp = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/theirs/typed",
+            "--type",
+            "string",
+            "--count",
+            "3",
+            "--rate",
+            "10",
+            "--wait-subscribers",
+            "0",
+            "--linger",
+            "2",
+            "--name",
+            "s",
+        ],
+    );
     let mut n = 0;
     let t = Instant::now();
     while t.elapsed() < Duration::from_secs(3) {
-        n += typed.take(Duration::from_millis(100), &mut |_, _| {}).unwrap();
+        n += typed
+            .take(Duration::from_millis(100), &mut |_, _| {})
+            .unwrap();
     }
     let _ = sp.wait();
     assert_eq!(n, 0, "messages of another type were read");
 
     // Gaps in a publisher's seq are counted as lost.
-    let spec = TopicSpec { topic: "/gaps".into(), ros_type: RosType::Image, qos: Qos::default() };
+    let spec = TopicSpec {
+        topic: "/gaps".into(),
+        ros_type: RosType::Image,
+        qos: Qos::default(),
+    };
     let mut gaps = TopicReader1::new(&node, &spec).unwrap();
     let other = Node::start(&settings(&master, "perturb_gap_publisher")).unwrap();
     let mut gp = other.advertise("/gaps", ros1::IMAGE).unwrap();
@@ -470,7 +856,11 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
     let mut seen = Vec::new();
     for s in [0u32, 1, 2, 5, 6, 9] {
         let m = ImageMsg {
-            header: Header { stamp_sec: 1, stamp_nanosec: 0, frame_id: "f" },
+            header: Header {
+                stamp_sec: 1,
+                stamp_nanosec: 0,
+                frame_id: "f",
+            },
             height: 1,
             width: 1,
             encoding: "mono8",
@@ -482,7 +872,13 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
         gp.publish(&[&parts.head, parts.data, &parts.tail]);
         let t = Instant::now();
         while t.elapsed() < Duration::from_secs(5) {
-            if gaps.take(Duration::from_millis(50), &mut |seq, _| seen.push(seq.unwrap())).unwrap() > 0 {
+            if gaps
+                .take(Duration::from_millis(50), &mut |seq, _| {
+                    seen.push(seq.unwrap())
+                })
+                .unwrap()
+                > 0
+            {
                 break;
             }
         }
@@ -492,5 +888,56 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
     // The publisher's node goes away: the reader carries on with nothing to read.
     drop(gp);
     drop(other);
-    assert_eq!(gaps.take(Duration::from_millis(300), &mut |_, _| {}).unwrap(), 0);
+    assert_eq!(
+        gaps.take(Duration::from_millis(300), &mut |_, _| {})
+            .unwrap(),
+        0
+    );
+}
+
+#[test]
+fn ros1_profile_mcap_ouster_replays_through_perturbd() {
+    let bag = perturb_tests::workspace().join("../shared/data/mcap_ouster_os1_pointcloudset/test.mcap");
+    if !bag.exists() {
+        assert!(
+            std::env::var("CI").ok().as_deref() != Some("true"),
+            "{} is missing under CI=true",
+            bag.display()
+        );
+        eprintln!("SKIP: {} is absent", bag.display());
+        return;
+    }
+    if !have_rosbags() {
+        return;
+    }
+    let ns = Namespace::new("ros1-mcap");
+    let daemon_cfg = ns.dir.join("perturbd.toml");
+    std::fs::write(
+        &daemon_cfg,
+        "[[streams]]\nname = \"os1\"\nmodality = \"lidar\"\nsensor = \"hdl64e\"\nperturbation = { id = \"L-C1\", severity = 2, seed = 3 }\n",
+    )
+    .unwrap();
+    let mut daemon = ns.start_daemon(&daemon_cfg);
+    let out = ns.dir.join("out.bag");
+    let o = ns
+        .command(exe("perturb-bridge"))
+        .arg("replay")
+        .arg(&bag)
+        .args(["--rate", "0", "--topic", "/os1_cloud_node/points=os1", "--record"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    daemon.stop();
+    let msgs = read_bag(&out);
+    let raw: Vec<&Value> = msgs.iter().filter(|m| m["topic"] == "/os1/raw").collect();
+    let pert: Vec<&Value> = msgs.iter().filter(|m| m["topic"] == "/os1/perturbed").collect();
+    assert_eq!((raw.len(), pert.len()), (2, 2), "{msgs:?}");
+    for (r, p) in raw.iter().zip(&pert) {
+        assert_eq!((r["width"].as_u64(), r["height"].as_u64()), (Some(2048), Some(64)));
+        for k in ["sec", "nanosec", "frame_id"] {
+            assert_eq!(r[k], p[k], "{k}");
+        }
+        assert_ne!(r["sha256"], p["sha256"], "not perturbed");
+    }
 }

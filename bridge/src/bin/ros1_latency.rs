@@ -89,7 +89,8 @@ fn ros_type(a: &Args) -> RosType {
 /// The bridge's own subscriber: prints `arrival_ns stamp_ns` per message.
 fn reader(a: &Args) -> Result<(), String> {
     let master = a.master.clone().ok_or("--master is needed")?;
-    let settings = Ros1Settings::resolve(Some(&master), Some("127.0.0.1"), "perturb_latency_reader")?;
+    let settings =
+        Ros1Settings::resolve(Some(&master), Some("127.0.0.1"), "perturb_latency_reader")?;
     let node = Node::start(&settings).map_err(|e| e.to_string())?;
     let spec = TopicSpec {
         topic: TOPIC.into(),
@@ -170,8 +171,7 @@ fn frame(a: &Args) -> Result<OwnedPayload, String> {
 }
 
 fn set_stamp(p: &mut OwnedPayload, ns: u64) {
-    if let OwnedPayload::Image { sec, nanosec, .. } | OwnedPayload::Cloud { sec, nanosec, .. } = p
-    {
+    if let OwnedPayload::Image { sec, nanosec, .. } | OwnedPayload::Cloud { sec, nanosec, .. } = p {
         *sec = (ns / 1_000_000_000) as i32;
         *nanosec = (ns % 1_000_000_000) as u32;
     }
@@ -187,20 +187,37 @@ fn writer(a: &Args) -> Result<(), String> {
     let mut publisher = node.advertise(TOPIC, ty).map_err(|e| e.to_string())?;
     let kind = if a.cloud.is_some() { "cloud" } else { "image" };
     let mut child = match a.subscriber.as_str() {
-        "rospy" => Command::new(std::env::var("PERTURB_ROS_PYTHON").unwrap_or("/usr/bin/python3".into()))
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/tests/ros1_peer.py"))
-            .args(["sub", "--topic", TOPIC, "--type", kind, "--count", &(a.count + 1000).to_string()])
-            .args(["--timeout", "600", "--no-hash"])
-            .env("ROS_MASTER_URI", &uri)
-            .env("ROS_HOSTNAME", "127.0.0.1")
-            .env("ROS_HOME", &home)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .map_err(|e| e.to_string())?,
+        "rospy" => {
+            Command::new(std::env::var("PERTURB_ROS_PYTHON").unwrap_or("/usr/bin/python3".into()))
+                .arg(concat!(
+                    env!("CARGO_MANIFEST_DIR"),
+                    "/../tests/tests/ros1_peer.py"
+                ))
+                .args([
+                    "sub",
+                    "--topic",
+                    TOPIC,
+                    "--type",
+                    kind,
+                    "--count",
+                    &(a.count + 1000).to_string(),
+                ])
+                .args(["--timeout", "600", "--no-hash"])
+                .env("ROS_MASTER_URI", &uri)
+                .env("ROS_HOSTNAME", "127.0.0.1")
+                .env("ROS_HOME", &home)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::inherit())
+                .spawn()
+                .map_err(|e| e.to_string())?
+        }
         "bridge" => Command::new(std::env::current_exe().map_err(|e| e.to_string())?)
             .args(["--role-reader", "--master", &uri])
-            .args(if a.cloud.is_some() { ["--cloud", "1"] } else { ["--image", "1x1"] })
+            .args(if a.cloud.is_some() {
+                ["--cloud", "1"]
+            } else {
+                ["--image", "1x1"]
+            })
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
@@ -262,7 +279,11 @@ fn writer(a: &Args) -> Result<(), String> {
                 Ok(v) => v,
                 Err(_) => continue,
             };
-            if let (Some(t), Some(s), Some(n)) = (v["t_arrival_ns"].as_u64(), v["sec"].as_u64(), v["nsec"].as_u64()) {
+            if let (Some(t), Some(s), Some(n)) = (
+                v["t_arrival_ns"].as_u64(),
+                v["sec"].as_u64(),
+                v["nsec"].as_u64(),
+            ) {
                 lat.push(t.saturating_sub(s * 1_000_000_000 + n));
             }
         } else if let Some((t, s)) = l.split_once(' ')
@@ -300,7 +321,13 @@ fn writer(a: &Args) -> Result<(), String> {
 }
 
 fn main() {
-    let r = parse().and_then(|a| if a.role_reader { reader(&a) } else { writer(&a) });
+    let r = parse().and_then(|a| {
+        if a.role_reader {
+            reader(&a)
+        } else {
+            writer(&a)
+        }
+    });
     if let Err(e) = r {
         eprintln!("error: {e}");
         std::process::exit(1);
