@@ -897,7 +897,8 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
 
 #[test]
 fn ros1_profile_mcap_ouster_replays_through_perturbd() {
-    let bag = perturb_tests::workspace().join("../shared/data/mcap_ouster_os1_pointcloudset/test.mcap");
+    let bag =
+        perturb_tests::workspace().join("../shared/data/mcap_ouster_os1_pointcloudset/test.mcap");
     if !bag.exists() {
         assert!(
             std::env::var("CI").ok().as_deref() != Some("true"),
@@ -923,7 +924,13 @@ fn ros1_profile_mcap_ouster_replays_through_perturbd() {
         .command(exe("perturb-bridge"))
         .arg("replay")
         .arg(&bag)
-        .args(["--rate", "0", "--topic", "/os1_cloud_node/points=os1", "--record"])
+        .args([
+            "--rate",
+            "0",
+            "--topic",
+            "/os1_cloud_node/points=os1",
+            "--record",
+        ])
         .arg(&out)
         .output()
         .unwrap();
@@ -931,10 +938,16 @@ fn ros1_profile_mcap_ouster_replays_through_perturbd() {
     daemon.stop();
     let msgs = read_bag(&out);
     let raw: Vec<&Value> = msgs.iter().filter(|m| m["topic"] == "/os1/raw").collect();
-    let pert: Vec<&Value> = msgs.iter().filter(|m| m["topic"] == "/os1/perturbed").collect();
+    let pert: Vec<&Value> = msgs
+        .iter()
+        .filter(|m| m["topic"] == "/os1/perturbed")
+        .collect();
     assert_eq!((raw.len(), pert.len()), (2, 2), "{msgs:?}");
     for (r, p) in raw.iter().zip(&pert) {
-        assert_eq!((r["width"].as_u64(), r["height"].as_u64()), (Some(2048), Some(64)));
+        assert_eq!(
+            (r["width"].as_u64(), r["height"].as_u64()),
+            (Some(2048), Some(64))
+        );
         for k in ["sec", "nanosec", "frame_id"] {
             assert_eq!(r[k], p[k], "{k}");
         }

@@ -25,19 +25,27 @@ fn ros1_bag_info_and_apply_keep_the_ros1_format() {
         },
     )
     .unwrap();
-    let cam = w.add_topic("/camera/image_raw", "sensor_msgs/Image").unwrap();
+    let cam = w
+        .add_topic("/camera/image_raw", "sensor_msgs/Image")
+        .unwrap();
     let note = w.add_topic("/note", "std_msgs/String").unwrap();
     let mut originals = Vec::new();
     for k in 0..4u32 {
         let img = street_image(48, 32, k as u64);
         let m = ImageMsg::from_view(
-            Header { stamp_sec: 100 + k as i32, stamp_nanosec: 9, frame_id: "cam" },
+            Header {
+                stamp_sec: 100 + k as i32,
+                stamp_nanosec: 9,
+                frame_id: "cam",
+            },
             &img.view(),
         );
-        w.write(cam, 1_000_000_000 * (k as u64 + 1), &m.encode_ros1(500 + k)).unwrap();
+        w.write(cam, 1_000_000_000 * (k as u64 + 1), &m.encode_ros1(500 + k))
+            .unwrap();
         originals.push(img.data.clone());
     }
-    w.write(note, 9_000_000_000, &ros1::encode_string("kept")).unwrap();
+    w.write(note, 9_000_000_000, &ros1::encode_string("kept"))
+        .unwrap();
     w.finish().unwrap();
 
     let info = ok(&["info", input.to_str().unwrap()]);
@@ -46,7 +54,18 @@ fn ros1_bag_info_and_apply_keep_the_ros1_format() {
     assert!(info.contains("5 messages read"), "{info}");
 
     let out = dir.join("out.bag");
-    ok(&["apply", "--id", "C-A1", "--severity", "3", "--seed", "2", input.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    ok(&[
+        "apply",
+        "--id",
+        "C-A1",
+        "--severity",
+        "3",
+        "--seed",
+        "2",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     let bag = Bag::open(&out).unwrap();
     assert!(bag.is_ros1_bag(), "the output keeps the input's format");
     let mut k = 0;
@@ -55,7 +74,9 @@ fn ros1_bag_info_and_apply_keep_the_ros1_format() {
     bag.for_each(&Filter::default(), |m| {
         match m.topic {
             "/camera/image_raw" => {
-                let Some(Ok(SensorMessage::Image(i))) = m.decode() else { panic!("an image") };
+                let Some(Ok(SensorMessage::Image(i))) = m.decode() else {
+                    panic!("an image")
+                };
                 assert_eq!(m.header_seq(), Some(500 + k as u32), "header seq kept");
                 assert_eq!(i.header.stamp_sec, 100 + k as i32);
                 assert_ne!(i.data, &originals[k][..], "perturbed");
@@ -99,5 +120,8 @@ fn ros1_bag_info_and_apply_keep_the_ros1_format() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
-    assert!(text.starts_with("9 ['/camera/image_raw', '/note', '/perturb/events']"), "{text}");
+    assert!(
+        text.starts_with("9 ['/camera/image_raw', '/note', '/perturb/events']"),
+        "{text}"
+    );
 }
