@@ -10,6 +10,7 @@
 //! [dds]
 //! backend = "rustdds"         # or "cyclone"
 //! domain_id = 0
+//! interfaces = ["lo"]         # names or IPv4 addresses; omitted: the DDS implementation's default
 //!
 //! [ros1]                      # for entries with transport = "ros1"
 //! master_uri = "http://127.0.0.1:11311/"   # default: ROS_MASTER_URI
@@ -152,6 +153,22 @@ pub struct DdsSection {
     pub backend: BackendKind,
     /// Domain.
     pub domain_id: u16,
+    /// Network interfaces DDS may use (names like `lo`, `eth0`, or IPv4 addresses). Empty (the
+    /// default): the DDS implementation's own choice, as ROS 2 nodes on a vehicle expect.
+    /// `["lo"]` keeps every DDS packet on this computer (tests, benchmarks, an ADS on the same
+    /// computer whose DDS is also on loopback, e.g. with `ROS_LOCALHOST_ONLY=1`).
+    pub interfaces: Vec<String>,
+}
+
+impl DdsSection {
+    /// The participant this section describes.
+    pub fn participant(&self) -> crate::dds::ParticipantConfig {
+        crate::dds::ParticipantConfig {
+            backend: self.backend,
+            domain_id: self.domain_id,
+            interfaces: self.interfaces.clone(),
+        }
+    }
 }
 
 /// One `[[ingress]]` entry.
@@ -513,6 +530,15 @@ impl Config {
             }
             Ok(())
         };
+        if !self.ingress.is_empty() || !self.egress.is_empty() {
+            crate::dds::interfaces::resolve(&self.dds.interfaces).map_err(|e| {
+                let problem = match e {
+                    crate::dds::DdsError::Setup { reason, .. } => reason,
+                    other => other.to_string(),
+                };
+                err("dds.interfaces".into(), problem)
+            })?;
+        }
         let mut ingress_topics = BTreeSet::new();
         let mut sourced = BTreeSet::new();
         for (i, e) in self.ingress.iter().enumerate() {

@@ -65,6 +65,10 @@ enum Command {
         /// DDS backend for --ros-prefix.
         #[arg(long, default_value = "rustdds")]
         dds: String,
+        /// Network interface DDS may use for --ros-prefix (name or IPv4 address; repeatable;
+        /// default: the DDS implementation's choice). `lo` keeps it on this computer.
+        #[arg(long = "dds-interface")]
+        dds_interfaces: Vec<String>,
         /// Publish the --ros-prefix topics on ROS 1 (TCPROS; master from ROS_MASTER_URI)
         /// instead of ROS 2.
         #[arg(long)]
@@ -162,6 +166,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
             bus,
             ros_prefix,
             dds,
+            dds_interfaces,
             ros1,
             clock,
             record,
@@ -169,6 +174,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
             cfg.ros1.clock = *clock;
             cfg.bridge.bus = bus_kind(bus)?;
             cfg.dds.backend = dds.parse::<BackendKind>().map_err(anyhow::Error::msg)?;
+            cfg.dds.interfaces = dds_interfaces.clone();
             let mut map = std::collections::BTreeMap::new();
             for t in topics {
                 let (topic, stream) = match t.split_once('=') {

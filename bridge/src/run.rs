@@ -72,8 +72,7 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
             if cfg.ingress.iter().any(|i| i.transport == Transport::Dds) {
                 Some(Arc::from(
                     dds::backend(
-                        cfg.dds.backend,
-                        cfg.dds.domain_id,
+                        &cfg.dds.participant(),
                         &format!("{}_ingress", cfg.bridge.name),
                     )
                     .context("dds (ingress participant)")?,
@@ -111,8 +110,7 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
             if cfg.egress.iter().any(|e| e.transport == Transport::Dds) {
                 Some(Arc::from(
                     dds::backend(
-                        cfg.dds.backend,
-                        cfg.dds.domain_id,
+                        &cfg.dds.participant(),
                         &format!("{}_egress", cfg.bridge.name),
                     )
                     .context("dds (egress participant)")?,
