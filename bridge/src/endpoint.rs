@@ -7,16 +7,16 @@ use crate::frame::Payload;
 use std::sync::Arc;
 use std::time::Duration;
 
+/// What a [`TopicReader`] calls for each message: the ROS 1 header `seq` (if any) and the
+/// message, or why it does not decode.
+pub type OnMessage<'f> = dyn FnMut(Option<u32>, Result<Received<'_>, perturb_core::Error>) + 'f;
+
 /// Reads sensor messages from one topic.
 pub trait TopicReader: Send {
     /// Waits up to `timeout` and passes every available message to `f` with the ROS 1 header
     /// `seq` (`None` over ROS 2, whose headers have none); a message that does not decode is
     /// passed as an error. Returns how many were passed.
-    fn take(
-        &mut self,
-        timeout: Duration,
-        f: &mut dyn FnMut(Option<u32>, Result<Received<'_>, perturb_core::Error>),
-    ) -> anyhow::Result<usize>;
+    fn take(&mut self, timeout: Duration, f: &mut OnMessage<'_>) -> anyhow::Result<usize>;
 
     /// Messages known to be lost before they reached the reader (gaps in a ROS 1 publisher's
     /// header `seq`, which include messages dropped from a full queue).
@@ -70,11 +70,7 @@ impl Endpoint {
 struct DdsTopicReader(Box<dyn DdsReader>);
 
 impl TopicReader for DdsTopicReader {
-    fn take(
-        &mut self,
-        timeout: Duration,
-        f: &mut dyn FnMut(Option<u32>, Result<Received<'_>, perturb_core::Error>),
-    ) -> anyhow::Result<usize> {
+    fn take(&mut self, timeout: Duration, f: &mut OnMessage<'_>) -> anyhow::Result<usize> {
         Ok(self.0.take(timeout, &mut |r| f(None, r))?)
     }
 }

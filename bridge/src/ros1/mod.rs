@@ -30,7 +30,7 @@ pub use publisher::Publisher;
 pub use subscriber::Subscriber;
 
 use crate::dds::{Received, RosType, TopicSpec};
-use crate::endpoint::{TopicReader, TopicWriter};
+use crate::endpoint::{OnMessage, TopicReader, TopicWriter};
 use crate::frame::Payload;
 use perturb_core::formats::ros::{CompressedImageMsg, ImageMsg, PointCloud2Msg};
 use perturb_core::formats::ros1::{self, MsgType};
@@ -177,11 +177,7 @@ impl TopicReader1 {
 }
 
 impl TopicReader for TopicReader1 {
-    fn take(
-        &mut self,
-        timeout: Duration,
-        f: &mut dyn FnMut(Option<u32>, Result<Received<'_>, perturb_core::Error>),
-    ) -> anyhow::Result<usize> {
+    fn take(&mut self, timeout: Duration, f: &mut OnMessage<'_>) -> anyhow::Result<usize> {
         let mut n = 0;
         let mut next = self.sub.recv(timeout);
         while let Some(m) = next {

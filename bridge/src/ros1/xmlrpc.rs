@@ -589,7 +589,8 @@ mod tests {
             Value::Struct(vec![("k".into(), Value::Nil)]),
         ]);
         assert_eq!(parse_response(&response_xml(&v)).unwrap(), v);
-        let (m, args) = parse_call(&call_xml("registerPublisher", &[v.clone()])).unwrap();
+        let (m, args) =
+            parse_call(&call_xml("registerPublisher", std::slice::from_ref(&v))).unwrap();
         assert_eq!((m.as_str(), args), ("registerPublisher", vec![v]));
     }
 

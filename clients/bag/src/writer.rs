@@ -51,9 +51,9 @@ impl std::str::FromStr for BagFormat {
 #[derive(Debug)]
 pub enum AnyWriter {
     /// rosbag2 MCAP.
-    Rosbag2(BagWriter),
+    Rosbag2(Box<BagWriter>),
     /// ROS 1 `.bag`, and the directory holding it when the bag was asked for as a directory.
-    Ros1(Ros1Writer, Option<PathBuf>),
+    Ros1(Box<Ros1Writer>, Option<PathBuf>),
 }
 
 impl AnyWriter {
@@ -76,13 +76,13 @@ impl AnyWriter {
                     Some(c) => c.parse::<Compression>().map_err(bad)?,
                     None => Compression::Zstd,
                 };
-                AnyWriter::Rosbag2(BagWriter::create(
+                AnyWriter::Rosbag2(Box::new(BagWriter::create(
                     path,
                     &WriterOptions {
                         compression,
                         ..Default::default()
                     },
-                )?)
+                )?))
             }
             BagFormat::Ros1 => {
                 let compression = match compression {
@@ -115,13 +115,13 @@ impl AnyWriter {
                     (path.join(format!("{stem}.bag")), Some(path.to_path_buf()))
                 };
                 AnyWriter::Ros1(
-                    Ros1Writer::create(
+                    Box::new(Ros1Writer::create(
                         &file,
                         &Ros1WriterOptions {
                             compression,
                             ..Default::default()
                         },
-                    )?,
+                    )?),
                     dir,
                 )
             }

@@ -37,6 +37,9 @@ pub(crate) struct Ros1Bag {
     index_error: Option<String>,
 }
 
+/// What a file-order scan calls for each message: connection, log time, data.
+type MessageFn<'f> = dyn FnMut(&Connection, u64, &[u8]) -> Result<ControlFlow<()>, BagError> + 'f;
+
 /// One message's place: log time, chunk (index into `chunks`), offset in the chunk, connection.
 type Entry = (u64, usize, u32, u32);
 
@@ -234,10 +237,10 @@ impl Ros1Bag {
         let mut open: HashMap<usize, Cow<'_, [u8]>> = HashMap::new();
         let mut seqs: HashMap<u32, u32> = HashMap::new();
         for (time, ci, offset, conn_id) in entries {
-            if !open.contains_key(&ci) {
+            if let std::collections::hash_map::Entry::Vacant(slot) = open.entry(ci) {
                 match self.chunk_data(self.chunks[ci].pos) {
                     Ok((data, _)) => {
-                        open.insert(ci, data);
+                        slot.insert(data);
                     }
                     Err(e) => {
                         report.damage = Some(self.damage(e));
@@ -390,7 +393,7 @@ impl Ros1Bag {
     fn scan(
         &self,
         filter: &Filter,
-        f: &mut dyn FnMut(&Connection, u64, &[u8]) -> Result<ControlFlow<()>, BagError>,
+        f: &mut MessageFn<'_>,
     ) -> Result<(ControlFlow<()>, Option<String>), BagError> {
         let mut conns: BTreeMap<u32, Connection> = BTreeMap::new();
         let mut deliver = |r: &Record<'_>| -> Result<ControlFlow<()>, Stop> {
