@@ -20,6 +20,7 @@
 //! # Ok::<(), perturb_bag::BagError>(())
 //! ```
 
+pub mod dynamic;
 pub mod events;
 mod read;
 pub mod schema;
