@@ -1,96 +1,90 @@
-//! `perturb augment`: one perturbed variant per training sample, reproducible from a manifest.
+//! Training data for fine-tuning (paper, RQ4): one perturbed variant per training sample,
+//! reproducible from a manifest.
+//!
+//! For sample k (files in sorted order) a perturbation and severity are drawn uniformly from the
+//! selection with the seed, and the perturbed variant is written as `<name>__<ID>_s<N>.<ext>`
+//! beside a copy of the clean sample. `augment_manifest.csv` lists every output with its
+//! perturbation, severity, seed and sequence number (= k), so each variant can be regenerated
+//! with `perturb apply`.
 
-use crate::batch::{Args as BatchArgs, select};
+use crate::batch::{Selection, select};
 use crate::dataset::Dataset;
+use crate::error::{Result, StudyError};
 use crate::files::{Loaded, load, save_cloud, save_image, sensor_for};
-use anyhow::{Context, Result, bail};
+use crate::progress::Progress;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber};
 use perturb_core::registry::Modality;
 use perturb_core::rng::Rng;
 use rayon::prelude::*;
-use std::io::Write;
 use std::path::PathBuf;
 
 /// Salt of the draw of (perturbation, severity) per sample.
 const DRAW_SALT: u64 = 0xA11C_3E47;
 
-/// Arguments of `perturb augment`.
-#[derive(clap::Args)]
-#[command(after_help = "Example:
-  perturb augment train_images/ --out augmented/ --id C-C8 --id C-C11 --id C-E1 --seed 1
-
-For sample k (files in sorted order) a perturbation and severity are drawn uniformly from the
-selection with the seed, and the perturbed variant is written as <name>__<ID>_s<N>.<ext> beside a copy
-of the clean sample. augment_manifest.csv lists every output with its perturbation, severity, seed
-and sequence number (= k), so each variant can be regenerated with `perturb apply`.")]
-pub struct Args {
+/// What `perturb augment` does.
+#[derive(Clone, Debug, Default)]
+pub struct AugmentOptions {
     /// A folder of images or point clouds.
-    input: PathBuf,
+    pub input: PathBuf,
     /// Output folder.
-    #[arg(short, long)]
-    out: PathBuf,
-    /// Perturbation IDs or names to draw from (repeatable).
-    #[arg(long = "id")]
-    ids: Vec<String>,
-    /// Families to draw from (repeatable).
-    #[arg(long)]
-    family: Vec<String>,
-    /// Severities to draw from (repeatable; default all).
-    #[arg(long = "severity")]
-    severities: Vec<u8>,
+    pub out: PathBuf,
+    /// Perturbation IDs or names to draw from.
+    pub ids: Vec<String>,
+    /// Families to draw from.
+    pub families: Vec<String>,
+    /// Severities to draw from (empty: all).
+    pub severities: Vec<u8>,
     /// Seed of the draws and of the perturbations.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub seed: u64,
     /// Do not copy the clean samples (write only the variants).
-    #[arg(long)]
-    no_clean: bool,
+    pub no_clean: bool,
     /// LiDAR sensor model.
-    #[arg(long)]
-    sensor: Option<String>,
+    pub sensor: Option<String>,
     /// LiDAR full-scale intensity, 1 or 255.
-    #[arg(long)]
-    intensity_max: Option<f32>,
+    pub intensity_max: Option<f32>,
 }
 
-/// Runs `perturb augment`.
-pub fn run(a: Args) -> Result<()> {
+/// What an augmentation wrote.
+#[derive(Clone, Debug)]
+pub struct AugmentOutcome {
+    /// Samples of the input.
+    pub samples: usize,
+    /// Variants written (one per sample).
+    pub variants: usize,
+    /// `OUT/augment_manifest.csv`.
+    pub manifest: PathBuf,
+}
+
+/// Writes the variants and the manifest (samples in parallel on the current rayon pool).
+pub fn run(a: &AugmentOptions, progress: &dyn Progress) -> Result<AugmentOutcome> {
     let Dataset::Files {
         root,
         files,
         modality,
     } = Dataset::open(&a.input)?
     else {
-        bail!("augment works on a folder of images or point clouds, not on a bag");
+        return Err(StudyError::input(
+            &a.input,
+            "augment works on a folder of images or point clouds, not on a bag",
+        ));
     };
-    let sel = BatchArgs {
-        input: a.input.clone(),
-        out: a.out.clone(),
+    let sel = Selection {
         ids: a.ids.clone(),
-        family: a.family.clone(),
-        modality: (a.ids.is_empty() && a.family.is_empty()).then_some(modality),
+        families: a.families.clone(),
+        modality: (a.ids.is_empty() && a.families.is_empty()).then_some(modality),
         severities: a.severities.clone(),
-        seed: a.seed,
-        threads: None,
-        sensor: a.sensor.clone(),
-        intensity_max: a.intensity_max,
-        topic: vec![],
-        quiet: true,
-        lidar_metrics: false,
     };
-    let sets = select(&sel, &[modality])?;
+    let sets = select(&sel, &[modality], progress)?;
     let sensor = if modality == Modality::Lidar {
         let kind = perturb_core::formats::FileKind::from_path(&files[0]).ok();
-        Some(sensor_for(
-            kind,
-            a.sensor.as_deref(),
-            a.intensity_max,
-            false,
-        )?)
+        let s = sensor_for(kind, a.sensor.as_deref(), a.intensity_max)?;
+        progress.note(&crate::files::describe_sensor(&s));
+        Some(s)
     } else {
         None
     };
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    std::fs::create_dir_all(&a.out).map_err(StudyError::io(&a.out))?;
+    progress.set_length(files.len() as u64);
     let rows: Vec<String> = files
         .par_iter()
         .enumerate()
@@ -107,12 +101,14 @@ pub fn run(a: Args) -> Result<()> {
                 rel.with_file_name(format!("{base}__{}_s{}{ext}", set.entry.id, set.severity));
             let out = a.out.join(&variant);
             if let Some(p) = out.parent() {
-                std::fs::create_dir_all(p)?;
+                std::fs::create_dir_all(p).map_err(StudyError::io(p))?;
             }
+            let perturbing = || format!("perturbing {}", input.display());
             match load(&input)? {
                 Loaded::Image(img, kind) => {
                     let o = CameraPerturber::new(set.entry.id, set.severity, a.seed)?
-                        .apply_owned(&img.view(), k as u64)?;
+                        .apply_owned(&img.view(), k as u64)
+                        .map_err(StudyError::perturb(perturbing()))?;
                     save_image(&out, &o.view(), kind)?;
                 }
                 Loaded::Cloud(c, kind, meta) => {
@@ -122,14 +118,19 @@ pub fn run(a: Args) -> Result<()> {
                         a.seed,
                         sensor.clone().unwrap_or_default(),
                     )?;
-                    let o = p.apply_owned(&c.view(), k as u64, None)?;
+                    let o = p
+                        .apply_owned(&c.view(), k as u64, None)
+                        .map_err(StudyError::perturb(perturbing()))?;
                     save_cloud(&out, &o.view(), kind, meta)?;
                 }
             }
             if !a.no_clean {
-                std::fs::copy(&input, a.out.join(rel))
-                    .with_context(|| format!("cannot copy {}", input.display()))?;
+                let clean = a.out.join(rel);
+                std::fs::copy(&input, &clean).map_err(|e| {
+                    StudyError::input(&input, format!("cannot copy to {}: {e}", clean.display()))
+                })?;
             }
+            progress.inc(1);
             Ok(format!(
                 "{},{},{},{},{},{},{}",
                 rel.display(),
@@ -143,18 +144,16 @@ pub fn run(a: Args) -> Result<()> {
         })
         .collect::<Result<_>>()?;
     let path = a.out.join("augment_manifest.csv");
-    let mut f =
-        std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?;
-    writeln!(f, "sample,output,id,name,severity,seed,seq")?;
+    let mut text = String::from("sample,output,id,name,severity,seed,seq\n");
     for r in &rows {
-        writeln!(f, "{r}")?;
+        text.push_str(r);
+        text.push('\n');
     }
-    eprintln!(
-        "{} samples, {} variants{} written to {}",
-        files.len(),
-        rows.len(),
-        if a.no_clean { "" } else { " and clean copies" },
-        a.out.display()
-    );
-    Ok(())
+    std::fs::write(&path, text).map_err(StudyError::io(&path))?;
+    progress.finish();
+    Ok(AugmentOutcome {
+        samples: files.len(),
+        variants: rows.len(),
+        manifest: path,
+    })
 }

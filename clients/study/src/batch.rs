@@ -1,9 +1,15 @@
-//! `perturb batch`: every selected perturbation at every severity over a dataset.
+//! Every selected perturbation at every severity over a dataset (paper, RQ1's perturbed sets).
+//!
+//! Output: `OUT/<ID>_<name>/s<N>/` holds the perturbed copy of the dataset (same file names and
+//! formats; a bag for a bag). The frame sequence number is the file's index in sorted order (for
+//! bags: the message's index on its topic), so every output can be reproduced with `perturb
+//! apply`. An interrupted run resumes where it stopped: finished sets carry a `.done` marker and
+//! are skipped, finished files are kept. `OUT/batch.json` records what was run.
 
 use crate::dataset::Dataset;
+use crate::error::{Result, StudyError};
 use crate::files::{Loaded, load, save_cloud, save_image, sensor_for};
-use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
+use crate::progress::Progress;
 use perturb_bag::Bag;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber, Spec};
 use perturb_core::registry::{CATALOGUE, Entry, Modality, find};
@@ -11,66 +17,22 @@ use perturb_core::sensors::SensorModel;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
-/// Arguments of `perturb batch`.
-#[derive(clap::Args)]
-#[command(after_help = "Examples:
-  perturb batch images/ --out perturbed/ --family blur          # every blur at severities 1..5
-  perturb batch scans/ --out perturbed/ --modality lidar --lidar-metrics
-  perturb batch drive.mcap --out perturbed/ --id C-C7 --id L-A9 --severity 1 --severity 3
-
-Output: OUT/<ID>_<name>/s<N>/ holds the perturbed copy of the dataset (same file names and
-formats; a bag for a bag). The frame sequence number is the file's index in sorted order (for
-bags: the message's index on its topic), so every output can be reproduced with `perturb apply`.
-An interrupted run resumes where it stopped: finished sets carry a .done marker and are skipped,
-finished files are kept. OUT/batch.json records what was run.
-
---lidar-metrics then runs the detector on the clean and the perturbed clouds of this run's LiDAR
-sets and writes the RQ1 table (retention, ATE; see `perturb metrics lidar --help`) to
-OUT/lidar_metrics.md and OUT/lidar_metrics.json, and prints it.")]
-pub struct Args {
-    /// A folder of images, a folder of point clouds (KITTI .bin, .pcd, .pcd.bin), or a bag.
-    pub input: PathBuf,
-    /// Output folder.
-    #[arg(short, long)]
-    pub out: PathBuf,
-    /// Perturbation IDs or names (repeatable).
-    #[arg(long = "id")]
+/// Which perturbations and severities to run. With no IDs, families or modality, every
+/// perturbation of the dataset's modalities is selected.
+#[derive(Clone, Debug, Default)]
+pub struct Selection {
+    /// Perturbation IDs or names.
     pub ids: Vec<String>,
-    /// Every perturbation of a family (noise, blur, weather, ...; repeatable).
-    #[arg(long)]
-    pub family: Vec<String>,
-    /// Every perturbation of a modality.
-    #[arg(long)]
+    /// Every perturbation of these families (noise, blur, weather, ...).
+    pub families: Vec<String>,
+    /// Every perturbation of this modality.
     pub modality: Option<Modality>,
-    /// Severities (repeatable; default all of each perturbation).
-    #[arg(long = "severity")]
+    /// Severities (empty: all of each perturbation).
     pub severities: Vec<u8>,
-    /// Seed.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
-    /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
-    #[arg(long)]
-    pub sensor: Option<String>,
-    /// Full-scale intensity of the clouds, 1 or 255.
-    #[arg(long)]
-    pub intensity_max: Option<f32>,
-    /// Bags: only perturb these topics (repeatable).
-    #[arg(long)]
-    pub topic: Vec<String>,
-    /// Hide the progress bar.
-    #[arg(long)]
-    pub quiet: bool,
-    /// Afterwards, compute the LiDAR detection metrics (retention, ATE) of the LiDAR sets and
-    /// write them to OUT/lidar_metrics.md and OUT/lidar_metrics.json.
-    #[arg(long, visible_alias = "metrics")]
-    pub lidar_metrics: bool,
 }
 
 /// One (perturbation, severity) output set.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 pub struct Set {
     /// The catalogue entry.
     pub entry: &'static Entry,
@@ -86,28 +48,33 @@ impl Set {
     }
 }
 
-/// The sets selected by the arguments, restricted to the modalities of the dataset.
-pub fn select(args: &Args, modalities: &[Modality]) -> Result<Vec<Set>> {
+/// The sets selected, restricted to the modalities of the dataset. Perturbations this build
+/// does not implement are skipped with a note.
+pub fn select(
+    sel: &Selection,
+    modalities: &[Modality],
+    progress: &dyn Progress,
+) -> Result<Vec<Set>> {
     let mut entries: Vec<&'static Entry> = Vec::new();
-    for id in &args.ids {
+    for id in &sel.ids {
         entries.push(find(id)?);
     }
-    for fam in &args.family {
+    for fam in &sel.families {
         let found: Vec<_> = CATALOGUE
             .iter()
             .filter(|e| e.family.eq_ignore_ascii_case(fam))
             .collect();
         if found.is_empty() {
-            bail!(
+            return Err(StudyError::Config(format!(
                 "no perturbation in family `{fam}` (families: noise, blur, weather, distortion, pattern, color, sensor, local, affine, motion)"
-            );
+            )));
         }
         entries.extend(found);
     }
-    if let Some(m) = args.modality {
+    if let Some(m) = sel.modality {
         entries.extend(CATALOGUE.iter().filter(|e| e.modality == m));
     }
-    if args.ids.is_empty() && args.family.is_empty() && args.modality.is_none() {
+    if sel.ids.is_empty() && sel.families.is_empty() && sel.modality.is_none() {
         entries.extend(
             CATALOGUE
                 .iter()
@@ -119,62 +86,80 @@ pub fn select(args: &Args, modalities: &[Modality]) -> Result<Vec<Set>> {
     let mut sets = Vec::new();
     for e in entries {
         if !modalities.contains(&e.modality) {
-            if !args.ids.is_empty() {
-                bail!(
+            if !sel.ids.is_empty() {
+                return Err(StudyError::Config(format!(
                     "{} is a {} perturbation and the dataset has no {} data",
-                    e.id,
-                    e.modality,
-                    e.modality
-                );
+                    e.id, e.modality, e.modality
+                )));
             }
             continue;
         }
         if !e.is_implemented() {
-            eprintln!(
+            progress.note(&format!(
                 "skipping {} ({}): not implemented in this build",
                 e.id, e.name
-            );
+            ));
             continue;
         }
-        let sevs: Vec<u8> = if args.severities.is_empty() {
+        let sevs: Vec<u8> = if sel.severities.is_empty() {
             e.severities().collect()
         } else {
-            args.severities
+            sel.severities
                 .iter()
                 .copied()
                 .filter(|s| e.severities().contains(s))
                 .collect()
         };
-        for s in &args.severities {
-            e.check_severity(*s).or_else(|err| {
-                if args.ids.is_empty() {
-                    Ok(())
-                } else {
-                    Err(err)
-                }
-            })?;
+        for s in &sel.severities {
+            if let Err(err) = e.check_severity(*s)
+                && !sel.ids.is_empty()
+            {
+                return Err(err.into());
+            }
         }
         sets.extend(sevs.into_iter().map(|severity| Set { entry: e, severity }));
     }
     if sets.is_empty() {
-        bail!("nothing to do: no implemented perturbation matches the selection for this dataset");
+        return Err(StudyError::Config(
+            "nothing to do: no implemented perturbation matches the selection for this dataset"
+                .into(),
+        ));
     }
     Ok(sets)
 }
 
-fn progress(total: u64, quiet: bool) -> ProgressBar {
-    if quiet {
-        return ProgressBar::hidden();
-    }
-    let pb = ProgressBar::new(total);
-    pb.set_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} frames {msg} (eta {eta})",
-        )
-        .expect("template")
-        .progress_chars("=> "),
-    );
-    pb
+/// What `perturb batch` runs.
+#[derive(Clone, Debug, Default)]
+pub struct BatchOptions {
+    /// A folder of images, a folder of point clouds, or a bag.
+    pub input: PathBuf,
+    /// Output folder.
+    pub out: PathBuf,
+    /// The perturbations and severities.
+    pub selection: Selection,
+    /// Seed.
+    pub seed: u64,
+    /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
+    pub sensor: Option<String>,
+    /// Full-scale intensity of the clouds, 1 or 255.
+    pub intensity_max: Option<f32>,
+    /// Bags: only perturb these topics.
+    pub topics: Vec<String>,
+    /// Afterwards, compute the LiDAR detection metrics of the LiDAR sets.
+    pub lidar_metrics: bool,
+}
+
+/// What a batch run did.
+#[derive(Clone, Debug)]
+pub struct BatchOutcome {
+    /// Every selected set (finished now or before).
+    pub sets: Vec<Set>,
+    /// Sets that were already finished and skipped.
+    pub resumed: usize,
+    /// With [`BatchOptions::lidar_metrics`]: the RQ1 LiDAR table of this run's LiDAR sets, also
+    /// written to `OUT/lidar_metrics.md` and `OUT/lidar_metrics.json` (None when the run has no
+    /// LiDAR set).
+    pub lidar: Option<crate::lidar_eval::Report>,
 }
 
 #[derive(serde::Serialize)]
@@ -187,45 +172,53 @@ struct Manifest<'a> {
     sets: Vec<String>,
 }
 
-/// Runs `perturb batch`.
-pub fn run(args: Args) -> Result<()> {
-    let dataset = Dataset::open(&args.input)?;
+/// Forwards progress but not the per-set remarks of [`crate::perturb_bag::perturb_bag`].
+struct Ticks<'a>(&'a dyn Progress);
+
+impl Progress for Ticks<'_> {
+    fn inc(&self, n: u64) {
+        self.0.inc(n)
+    }
+}
+
+/// Runs the batch on the current rayon pool: every unfinished set is written, then (optionally)
+/// the LiDAR metrics are computed. Progress counts frames.
+pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome> {
+    let dataset = Dataset::open(&opts.input)?;
     let modalities = match &dataset {
         Dataset::Files { modality, .. } => vec![*modality],
         Dataset::Bag(_) => vec![Modality::Camera, Modality::Lidar],
     };
-    let sets = select(&args, &modalities)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let sets = select(&opts.selection, &modalities, progress)?;
+    std::fs::create_dir_all(&opts.out).map_err(StudyError::io(&opts.out))?;
     let manifest = Manifest {
         tool: concat!("perturb ", env!("CARGO_PKG_VERSION")),
-        input: args.input.display().to_string(),
-        seed: args.seed,
-        sensor: args.sensor.as_deref(),
-        intensity_max: args.intensity_max,
+        input: opts.input.display().to_string(),
+        seed: opts.seed,
+        sensor: opts.sensor.as_deref(),
+        intensity_max: opts.intensity_max,
         sets: sets
             .iter()
             .map(|s| format!("{}:{}", s.entry.id, s.severity))
             .collect(),
     };
+    let manifest_path = opts.out.join("batch.json");
     std::fs::write(
-        args.out.join("batch.json"),
-        serde_json::to_string_pretty(&manifest)?,
-    )?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads.unwrap_or(0))
-        .build()?;
+        &manifest_path,
+        serde_json::to_string_pretty(&manifest).expect("the manifest serialises"),
+    )
+    .map_err(StudyError::io(&manifest_path))?;
     let todo: Vec<Set> = sets
         .iter()
         .copied()
-        .filter(|s| !s.dir(&args.out).join(".done").exists())
+        .filter(|s| !s.dir(&opts.out).join(".done").exists())
         .collect();
-    if todo.len() < sets.len() {
-        eprintln!(
-            "resuming: {} of {} sets already done",
-            sets.len() - todo.len(),
+    let resumed = sets.len() - todo.len();
+    if resumed > 0 {
+        progress.note(&format!(
+            "resuming: {resumed} of {} sets already done",
             sets.len()
-        );
+        ));
     }
     match &dataset {
         Dataset::Files {
@@ -233,67 +226,71 @@ pub fn run(args: Args) -> Result<()> {
             files,
             modality,
         } => {
-            let pb = progress((todo.len() * files.len()) as u64, args.quiet);
+            progress.set_length((todo.len() * files.len()) as u64);
             let sensor = if *modality == Modality::Lidar {
                 let kind = perturb_core::formats::FileKind::from_path(&files[0]).ok();
-                Some(sensor_for(
-                    kind,
-                    args.sensor.as_deref(),
-                    args.intensity_max,
-                    args.quiet,
-                )?)
+                let s = sensor_for(kind, opts.sensor.as_deref(), opts.intensity_max)?;
+                progress.note(&crate::files::describe_sensor(&s));
+                Some(s)
             } else {
                 None
             };
             for set in &todo {
-                pb.set_message(format!("{} s{}", set.entry.id, set.severity));
-                pool.install(|| run_files_set(&args, *set, root, files, sensor.as_ref(), &pb))?;
+                progress.set_message(&format!("{} s{}", set.entry.id, set.severity));
+                run_files_set(opts, *set, root, files, sensor.as_ref(), progress)?;
             }
-            pb.finish_with_message("done");
         }
         Dataset::Bag(path) => {
             let bag = Bag::open(path)?;
             let total: u64 = bag.topics()?.iter().filter_map(|t| t.message_count).sum();
-            let pb = progress(total * todo.len() as u64, args.quiet);
-            let sensor = sensor_for(None, args.sensor.as_deref(), args.intensity_max, args.quiet)?;
-            pool.install(|| {
-                todo.par_iter().try_for_each(|set| {
-                    let dir = set.dir(&args.out);
-                    if dir.exists() {
-                        std::fs::remove_dir_all(&dir).with_context(|| {
-                            format!("cannot clear unfinished {}", dir.display())
-                        })?;
-                    }
-                    if let Some(parent) = dir.parent() {
-                        std::fs::create_dir_all(parent)?;
-                    }
-                    let spec = Spec::new(set.entry.id, set.severity, args.seed)?;
-                    let n = crate::apply::perturb_bag(
-                        &bag,
-                        &dir,
-                        spec,
-                        0,
-                        &sensor,
-                        &args.topic,
-                        true,
-                        &|| pb.inc(1),
-                    )?;
-                    std::fs::write(dir.join(".done"), format!("{{\"messages\": {n}}}"))?;
-                    anyhow::Ok(())
-                })
+            progress.set_length(total * todo.len() as u64);
+            let sensor = sensor_for(None, opts.sensor.as_deref(), opts.intensity_max)?;
+            progress.note(&crate::files::describe_sensor(&sensor));
+            todo.par_iter().try_for_each(|set| -> Result<()> {
+                let dir = set.dir(&opts.out);
+                if dir.exists() {
+                    std::fs::remove_dir_all(&dir).map_err(|e| {
+                        StudyError::input(&dir, format!("cannot clear the unfinished set: {e}"))
+                    })?;
+                }
+                if let Some(parent) = dir.parent() {
+                    std::fs::create_dir_all(parent).map_err(StudyError::io(parent))?;
+                }
+                let spec = Spec::new(set.entry.id, set.severity, opts.seed)?;
+                let n = crate::perturb_bag::perturb_bag(
+                    &bag,
+                    &dir,
+                    spec,
+                    0,
+                    &sensor,
+                    &opts.topics,
+                    &Ticks(progress),
+                )?;
+                let done = dir.join(".done");
+                std::fs::write(&done, format!("{{\"messages\": {n}}}"))
+                    .map_err(StudyError::io(&done))
             })?;
-            pb.finish_with_message("done");
         }
     }
-    eprintln!("{} sets written under {}", sets.len(), args.out.display());
-    if args.lidar_metrics {
-        lidar_metrics(&args, &sets, &pool)?;
-    }
-    Ok(())
+    progress.finish();
+    let lidar = if opts.lidar_metrics {
+        lidar_metrics(opts, &sets, progress)?
+    } else {
+        None
+    };
+    Ok(BatchOutcome {
+        sets,
+        resumed,
+        lidar,
+    })
 }
 
-/// `--lidar-metrics`: the RQ1 table of this run's LiDAR sets, into OUT.
-fn lidar_metrics(args: &Args, sets: &[Set], pool: &rayon::ThreadPool) -> Result<()> {
+/// The RQ1 table of this run's LiDAR sets, written into OUT.
+fn lidar_metrics(
+    opts: &BatchOptions,
+    sets: &[Set],
+    progress: &dyn Progress,
+) -> Result<Option<crate::lidar_eval::Report>> {
     use crate::lidar_eval::{EvalConfig, Format, SetDir, evaluate, render};
     let lidar: Vec<SetDir> = sets
         .iter()
@@ -301,54 +298,46 @@ fn lidar_metrics(args: &Args, sets: &[Set], pool: &rayon::ThreadPool) -> Result<
         .map(|s| SetDir {
             entry: s.entry,
             severity: s.severity,
-            dir: s.dir(&args.out),
+            dir: s.dir(&opts.out),
         })
         .collect();
     if lidar.is_empty() {
-        eprintln!("--lidar-metrics: no LiDAR set in this run, nothing to measure");
-        return Ok(());
+        progress.note("--lidar-metrics: no LiDAR set in this run, nothing to measure");
+        return Ok(None);
     }
-    let cfg = EvalConfig::new(
-        false,
-        2.0,
-        args.sensor.as_deref(),
-        args.topic.clone(),
-        args.quiet,
-    )?;
-    let report = pool
-        .install(|| evaluate(&args.input, &lidar, &cfg))
-        .context("computing the LiDAR metrics")?;
-    let md = args.out.join("lidar_metrics.md");
-    std::fs::write(&md, render(&report, Format::Markdown)?)
-        .with_context(|| format!("cannot write {}", md.display()))?;
-    let json = args.out.join("lidar_metrics.json");
-    std::fs::write(&json, render(&report, Format::Json)?)
-        .with_context(|| format!("cannot write {}", json.display()))?;
-    print!("{}", render(&report, Format::Table)?);
-    eprintln!(
+    let cfg = EvalConfig::new(false, 2.0, opts.sensor.as_deref(), opts.topics.clone())?;
+    let report = evaluate(&opts.input, &lidar, &cfg, progress)?;
+    for (name, format) in [
+        ("lidar_metrics.md", Format::Markdown),
+        ("lidar_metrics.json", Format::Json),
+    ] {
+        let path = opts.out.join(name);
+        std::fs::write(&path, render(&report, format)).map_err(StudyError::io(&path))?;
+    }
+    progress.note(&format!(
         "LiDAR metrics written to {} and {}",
-        md.display(),
-        json.display()
-    );
-    Ok(())
+        opts.out.join("lidar_metrics.md").display(),
+        opts.out.join("lidar_metrics.json").display()
+    ));
+    Ok(Some(report))
 }
 
 fn run_files_set(
-    args: &Args,
+    opts: &BatchOptions,
     set: Set,
     root: &Path,
     files: &[PathBuf],
     sensor: Option<&SensorModel>,
-    pb: &ProgressBar,
+    progress: &dyn Progress,
 ) -> Result<()> {
-    let dir = set.dir(&args.out);
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let spec = Spec::new(set.entry.id, set.severity, args.seed)?;
+    let dir = set.dir(&opts.out);
+    std::fs::create_dir_all(&dir).map_err(StudyError::io(&dir))?;
+    let spec = Spec::new(set.entry.id, set.severity, opts.seed)?;
     enum Worker {
         Camera(CameraPerturber),
         Lidar(Box<LidarPerturber>),
     }
-    let make = || -> Result<Worker> {
+    let make = || -> perturb_core::Result<Worker> {
         Ok(match set.entry.modality {
             Modality::Camera => Worker::Camera(CameraPerturber::from_spec(spec)?),
             Modality::Lidar => Worker::Lidar(Box::new(LidarPerturber::from_spec(
@@ -360,15 +349,15 @@ fn run_files_set(
     files
         .par_iter()
         .enumerate()
-        .map_init(make, |worker, (seq, rel)| {
-            let worker = worker.as_mut().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+        .map_init(make, |worker, (seq, rel)| -> Result<()> {
+            let worker = worker.as_mut().map_err(|e| StudyError::Core(e.clone()))?;
             let out = dir.join(rel);
             if out.exists() {
-                pb.inc(1);
+                progress.inc(1);
                 return Ok(());
             }
             if let Some(p) = out.parent() {
-                std::fs::create_dir_all(p)?;
+                std::fs::create_dir_all(p).map_err(StudyError::io(p))?;
             }
             let input = root.join(rel);
             // Written under a temporary name and renamed, so an interrupted run never leaves a
@@ -377,30 +366,34 @@ fn run_files_set(
                 ".{}.partial",
                 rel.file_name().and_then(|n| n.to_str()).unwrap_or("frame")
             ));
+            let perturbing = || format!("perturbing {}", input.display());
             match (load(&input)?, worker) {
                 (Loaded::Image(img, kind), Worker::Camera(p)) => {
                     let o = p
                         .apply_owned(&img.view(), seq as u64)
-                        .with_context(|| format!("perturbing {}", input.display()))?;
+                        .map_err(StudyError::perturb(perturbing()))?;
                     save_image(&tmp, &o.view(), kind)?;
                 }
                 (Loaded::Cloud(c, kind, meta), Worker::Lidar(p)) => {
                     let o = p
                         .apply_owned(&c.view(), seq as u64, None)
-                        .with_context(|| format!("perturbing {}", input.display()))?;
+                        .map_err(StudyError::perturb(perturbing()))?;
                     save_cloud(&tmp, &o.view(), kind, meta)?;
                 }
-                _ => bail!(
-                    "{} does not match the perturbation's modality",
-                    input.display()
-                ),
+                _ => {
+                    return Err(StudyError::input(
+                        &input,
+                        "does not match the perturbation's modality",
+                    ));
+                }
             }
-            std::fs::rename(&tmp, &out)
-                .with_context(|| format!("cannot rename {} to {}", tmp.display(), out.display()))?;
-            pb.inc(1);
+            std::fs::rename(&tmp, &out).map_err(|e| {
+                StudyError::input(&tmp, format!("cannot rename to {}: {e}", out.display()))
+            })?;
+            progress.inc(1);
             Ok(())
         })
         .collect::<Result<Vec<()>>>()?;
-    std::fs::write(dir.join(".done"), format!("{{\"files\": {}}}", files.len()))?;
-    Ok(())
+    let done = dir.join(".done");
+    std::fs::write(&done, format!("{{\"files\": {}}}", files.len())).map_err(StudyError::io(&done))
 }

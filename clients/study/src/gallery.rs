@@ -1,66 +1,54 @@
-//! `perturb gallery`: every perturbation at every severity on one frame or scan, as one picture.
+//! The paper's figure 1 for any frame: every perturbation at every severity on one frame or
+//! scan, as one picture (bird's-eye views for LiDAR, clean beside perturbed).
 
-use crate::files::{Loaded, load, save_image, sensor_for};
-use anyhow::{Result, bail};
-use perturb_core::formats::FileKind;
+use crate::error::{Result, StudyError};
+use crate::files::{Loaded, load, sensor_for};
+use crate::progress::Progress;
+use perturb_core::image::Image;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber};
 use perturb_core::registry::{Entry, Modality, of_modality};
 use perturb_core::viz::{Cell, ColorBy, bird_eye_view, contact_sheet};
 use rayon::prelude::*;
 use std::path::PathBuf;
 
-/// Arguments of `perturb gallery`.
-#[derive(clap::Args)]
-#[command(after_help = "Examples:
-  perturb gallery frame.png -o gallery.png                 # the paper's figure 1 for your camera
-  perturb gallery scan.bin -o bev.png --color-by intensity  # bird's-eye views, clean beside perturbed")]
-pub struct Args {
+/// What the gallery shows.
+#[derive(Clone, Debug)]
+pub struct GalleryOptions {
     /// An image or point-cloud file.
-    input: PathBuf,
-    /// Output PNG.
-    #[arg(short, long)]
-    output: PathBuf,
-    /// Only these IDs (repeatable).
-    #[arg(long = "id")]
-    ids: Vec<String>,
+    pub input: PathBuf,
+    /// Only these IDs (all of the input's modality when empty).
+    pub ids: Vec<String>,
     /// Width of one cell in pixels.
-    #[arg(long, default_value_t = 320)]
-    cell_width: u32,
+    pub cell_width: u32,
     /// Seed.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub seed: u64,
     /// Frame sequence number.
-    #[arg(long, default_value_t = 0)]
-    seq: u64,
+    pub seq: u64,
     /// LiDAR: colour points by height or intensity.
-    #[arg(long, value_parser = ["height", "intensity"], default_value = "height")]
-    color_by: String,
+    pub color_by: ColorBy,
     /// LiDAR: half-width of the bird's-eye view in metres.
-    #[arg(long, default_value_t = 40.0)]
-    range: f32,
+    pub range: f32,
     /// LiDAR sensor model.
-    #[arg(long)]
-    sensor: Option<String>,
+    pub sensor: Option<String>,
     /// LiDAR full-scale intensity, 1 or 255.
-    #[arg(long)]
-    intensity_max: Option<f32>,
+    pub intensity_max: Option<f32>,
 }
 
-fn selected(a: &Args, m: Modality) -> Vec<&'static Entry> {
+fn selected(a: &GalleryOptions, m: Modality) -> Vec<&'static Entry> {
     of_modality(m)
         .filter(|e| e.is_implemented())
         .filter(|e| a.ids.is_empty() || a.ids.iter().any(|i| i.eq_ignore_ascii_case(e.id)))
         .collect()
 }
 
-/// Renders the contact sheet.
-pub fn run(a: Args) -> Result<()> {
+/// Renders the contact sheet; a perturbation that fails on this input is left out with a note.
+pub fn render(a: &GalleryOptions, progress: &dyn Progress) -> Result<Image> {
     let label = |e: &Entry, s: u8| format!("{} {} S{s}", e.id, e.name);
     let sheet = match load(&a.input)? {
         Loaded::Image(img, _) => {
-            let entries = selected(&a, Modality::Camera);
+            let entries = selected(a, Modality::Camera);
             if entries.is_empty() {
-                bail!("no camera perturbation selected");
+                return Err(StudyError::Config("no camera perturbation selected".into()));
             }
             let rows: Vec<Vec<Cell>> = entries
                 .par_iter()
@@ -75,7 +63,7 @@ pub fn run(a: Args) -> Result<()> {
                         {
                             Ok(out) => out,
                             Err(err) => {
-                                eprintln!("{} s{s}: {err}", e.id);
+                                progress.note(&format!("{} s{s}: {err}", e.id));
                                 continue;
                             }
                         };
@@ -98,16 +86,13 @@ pub fn run(a: Args) -> Result<()> {
             )
         }
         Loaded::Cloud(cloud, kind, _) => {
-            let entries = selected(&a, Modality::Lidar);
+            let entries = selected(a, Modality::Lidar);
             if entries.is_empty() {
-                bail!("no LiDAR perturbation selected");
+                return Err(StudyError::Config("no LiDAR perturbation selected".into()));
             }
-            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max, false)?;
-            let color = if a.color_by == "intensity" {
-                ColorBy::Intensity
-            } else {
-                ColorBy::Height
-            };
+            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max)?;
+            progress.note(&crate::files::describe_sensor(&sensor));
+            let color = a.color_by;
             let size = a.cell_width.max(64);
             let bev = |c: &perturb_core::cloud::CloudView<'_>| {
                 bird_eye_view(c, size, a.range, color, sensor.intensity_max, &[])
@@ -128,7 +113,7 @@ pub fn run(a: Args) -> Result<()> {
                                 image: bev(&o.view()),
                                 label: format!("{} S{s} {}", e.id, o.len()),
                             }),
-                            Err(err) => eprintln!("{} s{s}: {err}", e.id),
+                            Err(err) => progress.note(&format!("{} s{s}: {err}", e.id)),
                         }
                     }
                     row
@@ -145,12 +130,5 @@ pub fn run(a: Args) -> Result<()> {
             )
         }
     };
-    save_image(&a.output, &sheet.view(), FileKind::Png)?;
-    eprintln!(
-        "{}x{} gallery written to {}",
-        sheet.width,
-        sheet.height,
-        a.output.display()
-    );
-    Ok(())
+    Ok(sheet)
 }

@@ -1,195 +1,27 @@
-//! `perturb metrics`: the study's tables from batch outputs and model predictions.
+//! Camera metrics (paper, RQ1): a driving model's steering predictions on every perturbed set
+//! compared with its predictions on the clean frames: MSE and maximum deviation per
+//! (perturbation, severity), summarised per perturbation as the paper does.
+//!
+//! Prediction files are CSVs of `frame,steering` lines (a header line is allowed). Layouts found
+//! under the predictions folder: `PRED/C-A1_gaussian_noise/s3.csv`, `PRED/C-A1_s3.csv`,
+//! `PRED/C-A1_gaussian_noise/s3/anything.csv`. Frames are matched by the first column.
 
-use anyhow::{Context, Result, bail};
+use crate::Format;
+use crate::error::{Result, StudyError};
 use perturb_core::metrics::{SteeringMetrics, steering_metrics, summarize_camera};
 use perturb_core::registry::{CATALOGUE, Entry};
 use std::collections::BTreeMap;
+use std::fmt::Write;
 use std::path::{Path, PathBuf};
-
-/// Output format of a metrics table.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
-pub enum Format {
-    /// Aligned terminal table.
-    #[default]
-    Table,
-    /// Markdown table.
-    Markdown,
-    /// CSV, one row per perturbation and severity.
-    Csv,
-    /// JSON.
-    Json,
-}
-
-/// Arguments of `perturb metrics`.
-#[derive(clap::Args)]
-pub struct Args {
-    #[command(subcommand)]
-    command: Command,
-}
-
-#[derive(clap::Subcommand)]
-enum Command {
-    /// Camera (RQ1): MSE and maximum deviation of steering predictions against the baseline.
-    #[command(
-        after_help = "Run your driving model on the clean frames and on each set written by
-`perturb batch` (OUT/<ID>_<name>/s<N>/), and save one CSV per set with lines `frame,steering`
-(a header line is allowed). Layouts found under --predictions:
-  PRED/C-A1_gaussian_noise/s3.csv   PRED/C-A1_s3.csv   PRED/C-A1_gaussian_noise/s3/anything.csv
-Frames are matched by the first column."
-    )]
-    Steering {
-        /// The baseline predictions (clean frames).
-        #[arg(long)]
-        baseline: PathBuf,
-        /// Folder of per-set prediction CSVs.
-        #[arg(long)]
-        predictions: PathBuf,
-        /// Report format.
-        #[arg(long, value_enum, default_value_t = Format::Table)]
-        format: Format,
-    },
-    /// LiDAR (RQ1): retention of the baseline detections and their translation error (ATE).
-    #[command(
-        after_help = "Runs the clustering detector (Autoware Mini's lidar_cluster pipeline: ground removal,
-voxel grid, DBSCAN, minimum-area boxes; see `perturb detect`) on every clean scan and on its
-counterpart in every finished set that `perturb batch` wrote under ROOT
-(ROOT/<ID>_<name>/s<N>/: a folder of scans or a bag), and matches the boxes frame by frame (greedy,
-one-to-one, centre distance in x, y within --match-distance).
-
-Per (perturbation, severity), pooled over the frames:
-  retention = baseline detections still matched / baseline detections   (recall, 0..1)
-  ATE       = mean centre distance of the matched boxes, metres
-Per perturbation (the paper's RQ1 table): retention average and minimum over the severities,
-ATE maximum over the severities. Frames are detected in parallel; the numbers do not depend
-on --threads.
-
-Examples:
-  perturb batch scans/ --out perturbed/ --id L-B1 --id L-A9
-  perturb metrics lidar --clean scans/ --perturbed perturbed/
-  perturb metrics lidar --perturbed perturbed/ --format csv > lidar.csv   # --clean from batch.json
-  perturb metrics lidar --clean drive.mcap --perturbed perturbed_bags/ --format markdown"
-    )]
-    Lidar {
-        /// The clean data: the folder of scans or the bag given to `perturb batch` (default: the
-        /// input recorded in PERTURBED/batch.json).
-        #[arg(long)]
-        clean: Option<PathBuf>,
-        /// The output root of `perturb batch`.
-        #[arg(long)]
-        perturbed: PathBuf,
-        /// Report format (csv: one row per perturbation and severity).
-        #[arg(long, value_enum, default_value_t = Format::Table)]
-        format: Format,
-        /// Only these perturbations (IDs or names, repeatable; default every LiDAR set found).
-        #[arg(long = "id")]
-        ids: Vec<String>,
-        /// Largest centre distance of a match in the ground plane, metres.
-        #[arg(long, default_value_t = 2.0)]
-        match_distance: f32,
-        /// Drop clusters too large to be a road user (longer than 20 m or over 50 m^2), as the
-        /// object-level perturbations do; by default every cluster counts, as in Autoware Mini.
-        #[arg(long)]
-        objects: bool,
-        /// LiDAR sensor model used to read the clouds (only the intensity scale depends on it).
-        #[arg(long)]
-        sensor: Option<String>,
-        /// Bags: only these PointCloud2 topics (repeatable; default all).
-        #[arg(long)]
-        topic: Vec<String>,
-        /// Worker threads (default: all cores).
-        #[arg(long)]
-        threads: Option<usize>,
-        /// Hide the progress bar.
-        #[arg(long)]
-        quiet: bool,
-    },
-}
-
-/// Runs `perturb metrics`.
-pub fn run(a: Args) -> Result<()> {
-    match a.command {
-        Command::Steering {
-            baseline,
-            predictions,
-            format,
-        } => steering(&baseline, &predictions, format),
-        Command::Lidar {
-            clean,
-            perturbed,
-            format,
-            ids,
-            match_distance,
-            objects,
-            sensor,
-            topic,
-            threads,
-            quiet,
-        } => {
-            let clean = match clean {
-                Some(c) => c,
-                None => clean_from_manifest(&perturbed)?,
-            };
-            let mut sets = crate::lidar_eval::discover_sets(&perturbed)?;
-            if !ids.is_empty() {
-                let wanted = ids
-                    .iter()
-                    .map(|i| perturb_core::registry::find(i).map(|e| e.id))
-                    .collect::<std::result::Result<Vec<_>, _>>()?;
-                sets.retain(|s| wanted.contains(&s.entry.id));
-            }
-            if sets.is_empty() {
-                bail!(
-                    "no finished LiDAR set (<ID>_<name>/s<N>/ with a .done marker) under {}",
-                    perturbed.display()
-                );
-            }
-            let cfg = crate::lidar_eval::EvalConfig::new(
-                objects,
-                match_distance,
-                sensor.as_deref(),
-                topic,
-                quiet,
-            )?;
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads.unwrap_or(0))
-                .build()?;
-            let report = pool.install(|| crate::lidar_eval::evaluate(&clean, &sets, &cfg))?;
-            print!("{}", crate::lidar_eval::render(&report, format)?);
-            Ok(())
-        }
-    }
-}
-
-/// The input recorded in ROOT/batch.json.
-fn clean_from_manifest(root: &Path) -> Result<PathBuf> {
-    let path = root.join("batch.json");
-    let text = std::fs::read_to_string(&path).with_context(|| {
-        format!(
-            "cannot read {} to find the clean data; give it with --clean",
-            path.display()
-        )
-    })?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))?;
-    match v.get("input").and_then(|i| i.as_str()) {
-        Some(i) => {
-            eprintln!(
-                "clean data: {i} (from {}; override with --clean)",
-                path.display()
-            );
-            Ok(PathBuf::from(i))
-        }
-        None => bail!(
-            "{} records no input; give the clean data with --clean",
-            path.display()
-        ),
-    }
-}
 
 /// Reads `frame,value` lines.
 pub fn read_steering_csv(path: &Path) -> Result<Vec<(String, f64)>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text = std::fs::read_to_string(path).map_err(StudyError::io(path))?;
+    let bad = |line: usize, reason: String| StudyError::Table {
+        path: path.to_path_buf(),
+        line: Some(line),
+        reason,
+    };
     let mut out = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -198,37 +30,35 @@ pub fn read_steering_csv(path: &Path) -> Result<Vec<(String, f64)>> {
         }
         let mut it = line.split(',');
         let (Some(frame), Some(value)) = (it.next(), it.next()) else {
-            bail!(
-                "{}:{}: expected `frame,value`, found `{line}`",
-                path.display(),
-                n + 1
-            );
+            return Err(bad(
+                n + 1,
+                format!("expected `frame,value`, found `{line}`"),
+            ));
         };
         match value.trim().parse::<f64>() {
             Ok(v) if v.is_finite() => out.push((frame.trim().to_string(), v)),
-            Ok(_) => bail!(
-                "{}:{}: steering value `{}` is not finite",
-                path.display(),
-                n + 1,
-                value.trim()
-            ),
+            Ok(_) => {
+                return Err(bad(
+                    n + 1,
+                    format!("steering value `{}` is not finite", value.trim()),
+                ));
+            }
             Err(_) if out.is_empty() && n == 0 => {} // a header line
-            Err(_) => bail!(
-                "{}:{}: `{}` is not a number",
-                path.display(),
-                n + 1,
-                value.trim()
-            ),
+            Err(_) => return Err(bad(n + 1, format!("`{}` is not a number", value.trim()))),
         }
     }
     if out.is_empty() {
-        bail!("{} holds no prediction", path.display());
+        return Err(StudyError::Table {
+            path: path.to_path_buf(),
+            line: None,
+            reason: "holds no prediction".into(),
+        });
     }
     Ok(out)
 }
 
 /// The (perturbation, severity) a prediction file belongs to, from its path.
-fn classify(rel: &Path) -> Option<(&'static Entry, u8)> {
+pub fn classify(rel: &Path) -> Option<(&'static Entry, u8)> {
     let parts: Vec<String> = rel
         .iter()
         .map(|c| c.to_string_lossy().trim_end_matches(".csv").to_string())
@@ -263,8 +93,8 @@ fn classify(rel: &Path) -> Option<(&'static Entry, u8)> {
 }
 
 fn csv_files(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
-    for e in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
-        let p = e?.path();
+    for e in std::fs::read_dir(dir).map_err(StudyError::io(dir))? {
+        let p = e.map_err(StudyError::io(dir))?.path();
         if p.is_dir() {
             csv_files(&p, out)?;
         } else if p.extension().is_some_and(|x| x == "csv") {
@@ -274,33 +104,47 @@ fn csv_files(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     Ok(())
 }
 
-#[derive(serde::Serialize)]
-struct SteeringRow {
-    id: &'static str,
-    name: &'static str,
-    severity: u8,
+/// The metrics of one (perturbation, severity) prediction file.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SteeringRow {
+    /// Perturbation ID.
+    pub id: &'static str,
+    /// Perturbation name.
+    pub name: &'static str,
+    /// Severity.
+    pub severity: u8,
+    /// MSE, maximum deviation, jitter.
     #[serde(flatten)]
-    m: SteeringMetrics,
+    pub m: SteeringMetrics,
 }
 
-fn steering(baseline: &Path, predictions: &Path, format: Format) -> Result<()> {
+/// Every prediction file under a folder compared with the baseline.
+#[derive(Clone, Debug)]
+pub struct SteeringReport {
+    /// Per (perturbation, severity), in file order.
+    pub rows: Vec<SteeringRow>,
+    /// Files whose perturbation and severity could not be told from their path.
+    pub skipped: Vec<PathBuf>,
+}
+
+/// Compares every prediction CSV under `predictions` with `baseline`.
+pub fn evaluate(baseline: &Path, predictions: &Path) -> Result<SteeringReport> {
     let base = read_steering_csv(baseline)?;
     let mut files = Vec::new();
     csv_files(predictions, &mut files)?;
     files.sort();
     let mut rows: Vec<SteeringRow> = Vec::new();
+    let mut skipped = Vec::new();
     for f in &files {
         let rel = f.strip_prefix(predictions).unwrap_or(f);
         let Some((entry, severity)) = classify(rel) else {
-            eprintln!(
-                "skipping {}: cannot tell the perturbation and severity from its path",
-                f.display()
-            );
+            skipped.push(f.clone());
             continue;
         };
         let pert = read_steering_csv(f)?;
-        let m = steering_metrics(&base, &pert)
-            .with_context(|| format!("comparing {} with {}", f.display(), baseline.display()))?;
+        let m = steering_metrics(&base, &pert).map_err(|e| {
+            StudyError::input(f, format!("comparing with {}: {e}", baseline.display()))
+        })?;
         rows.push(SteeringRow {
             id: entry.id,
             name: entry.name,
@@ -309,16 +153,27 @@ fn steering(baseline: &Path, predictions: &Path, format: Format) -> Result<()> {
         });
     }
     if rows.is_empty() {
-        bail!("no prediction CSV found under {}", predictions.display());
+        return Err(StudyError::input(
+            predictions,
+            "no prediction CSV found under it",
+        ));
     }
+    Ok(SteeringReport { rows, skipped })
+}
+
+/// The report in `format`: per perturbation (table, markdown: the paper's columns), per
+/// severity (CSV), or both (JSON).
+pub fn render(report: &SteeringReport, format: Format) -> String {
+    let rows = &report.rows;
     let mut by_id: BTreeMap<usize, Vec<&SteeringRow>> = BTreeMap::new();
-    for r in &rows {
+    for r in rows {
         let pos = CATALOGUE
             .iter()
             .position(|e| e.id == r.id)
             .unwrap_or(usize::MAX);
         by_id.entry(pos).or_default().push(r);
     }
+    let mut s = String::new();
     match format {
         Format::Json => {
             #[derive(serde::Serialize)]
@@ -333,20 +188,20 @@ fn steering(baseline: &Path, predictions: &Path, format: Format) -> Result<()> {
                     serde_json::json!({"id": rs[0].id, "name": rs[0].name, "avg_mse": s.avg_mse, "max_mse": s.max_mse, "max_abs_deviation": s.max_abs_deviation})
                 })
                 .collect();
-            println!(
-                "{}",
-                serde_json::to_string_pretty(&Out {
-                    per_severity: &rows,
-                    per_perturbation: per
-                })?
-            );
+            s = serde_json::to_string_pretty(&Out {
+                per_severity: rows,
+                per_perturbation: per,
+            })
+            .expect("the report serialises")
+                + "\n";
         }
         Format::Csv => {
-            println!(
-                "id,name,severity,frames,mse,max_abs_deviation,jitter_baseline,jitter_perturbed"
+            s.push_str(
+                "id,name,severity,frames,mse,max_abs_deviation,jitter_baseline,jitter_perturbed\n",
             );
-            for r in &rows {
-                println!(
+            for r in rows {
+                let _ = writeln!(
+                    s,
                     "{},{},{},{},{},{},{},{}",
                     r.id,
                     r.name,
@@ -362,43 +217,46 @@ fn steering(baseline: &Path, predictions: &Path, format: Format) -> Result<()> {
         Format::Table | Format::Markdown => {
             let md = format == Format::Markdown;
             if md {
-                println!(
-                    "| id | name | avg MSE | max MSE | max deviation | severities |\n|---|---|---:|---:|---:|---|"
+                s.push_str(
+                    "| id | name | avg MSE | max MSE | max deviation | severities |\n|---|---|---:|---:|---:|---|\n",
                 );
             } else {
-                println!(
+                let _ = writeln!(
+                    s,
                     "{:<7} {:<24} {:>10} {:>10} {:>13}  severities",
                     "id", "name", "avg_mse", "max_mse", "max_deviation"
                 );
             }
             for rs in by_id.values() {
-                let s = summarize_camera(&rs.iter().map(|r| r.m).collect::<Vec<_>>());
+                let sm = summarize_camera(&rs.iter().map(|r| r.m).collect::<Vec<_>>());
                 let sev: Vec<String> = rs.iter().map(|r| r.severity.to_string()).collect();
                 if md {
-                    println!(
+                    let _ = writeln!(
+                        s,
                         "| {} | {} | {:.5} | {:.5} | {:.4} | {} |",
                         rs[0].id,
                         rs[0].name,
-                        s.avg_mse,
-                        s.max_mse,
-                        s.max_abs_deviation,
+                        sm.avg_mse,
+                        sm.max_mse,
+                        sm.max_abs_deviation,
                         sev.join(",")
                     );
                 } else {
-                    println!(
+                    let _ = writeln!(
+                        s,
                         "{:<7} {:<24} {:>10.5} {:>10.5} {:>13.4}  {}",
                         rs[0].id,
                         rs[0].name,
-                        s.avg_mse,
-                        s.max_mse,
-                        s.max_abs_deviation,
+                        sm.avg_mse,
+                        sm.max_mse,
+                        sm.max_abs_deviation,
                         sev.join(",")
                     );
                 }
             }
         }
     }
-    Ok(())
+    s
 }
 
 #[cfg(test)]

@@ -671,7 +671,6 @@ impl Writer {
             return self.base(schema, &ty.base, v);
         }
         let byte_like = matches!(ty.base, BaseType::Primitive(p) if p.is_byte_like());
-        let items: Vec<Option<&Value>>;
         let bytes: Option<&[u8]> = match v {
             Some(Value::Bytes(b)) if byte_like => Some(b),
             Some(Value::Bytes(_)) => {
@@ -709,7 +708,7 @@ impl Writer {
             self.buf.extend_from_slice(b);
             return Ok(());
         }
-        items = match v {
+        let items: Vec<Option<&Value>> = match v {
             Some(Value::Array(a)) => a.iter().map(Some).collect(),
             _ => vec![None; n],
         };
