@@ -297,16 +297,32 @@ pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
         .as_ref()
         .map(|p| pose_reader(run, &topics, p))
         .transpose()?;
-    let steering = cfg
-        .steering
-        .as_ref()
-        .map(|s| scalar_reader(run, &topics, s, "steering", default_steering_field, true))
-        .transpose()?;
-    let objects = cfg
-        .objects
-        .as_ref()
-        .map(|o| objects_reader(run, &topics, o))
-        .transpose()?;
+    // A run without the steering or objects topic (a LiDAR run has no steering command of an
+    // end-to-end model, a camera run no detections) has no jitter or coverage, with a note.
+    let has = |topic: &str| topics.iter().any(|t| t.topic == topic);
+    let steering = match &cfg.steering {
+        Some(s) if has(&s.topic) => Some(scalar_reader(
+            run,
+            &topics,
+            s,
+            "steering",
+            default_steering_field,
+            true,
+        )?),
+        Some(s) => {
+            notes.push(format!("no steering topic `{}`: no jitter", s.topic));
+            None
+        }
+        None => None,
+    };
+    let objects = match &cfg.objects {
+        Some(o) if has(&o.topic) => Some(objects_reader(run, &topics, o)?),
+        Some(o) => {
+            notes.push(format!("no objects topic `{}`: no coverage", o.topic));
+            None
+        }
+        None => None,
+    };
     // A missing takeover or collision topic means the signal never fired (a recorder only
     // writes topics that had messages).
     let mut flag = |cfg: &Option<TopicField>, what: &str| -> Result<Option<ScalarReader>> {
