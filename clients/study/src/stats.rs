@@ -186,6 +186,13 @@ pub fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
 }
 
+/// The indices of bootstrap resample `k` of `n` items (drawn with replacement from `seed` with
+/// the project's counter-keyed generator: resample k depends on (seed, k) only).
+pub fn resample(n: usize, k: usize, seed: u64) -> impl Iterator<Item = usize> {
+    let mut rng = perturb_core::rng::Rng::for_frame(seed, k as u64, 0xB007_57A9);
+    (0..n).map(move |_| rng.below(n as u64) as usize)
+}
+
 /// A percentile bootstrap confidence interval of Spearman's rho: `resamples` resamples of the
 /// pairs with replacement, drawn from `seed` (the project's counter-keyed generator, so the
 /// interval is reproducible); resamples where rho is undefined (a constant side) are skipped.
@@ -204,9 +211,7 @@ pub fn bootstrap_spearman_ci(
     let mut rhos = Vec::with_capacity(resamples);
     let (mut xs, mut ys) = (vec![0.0; n], vec![0.0; n]);
     for k in 0..resamples {
-        let mut rng = perturb_core::rng::Rng::for_frame(seed, k as u64, 0xB007_57A9);
-        for i in 0..n {
-            let j = rng.below(n as u64) as usize;
+        for (i, j) in resample(n, k, seed).enumerate() {
             xs[i] = x[j];
             ys[i] = y[j];
         }
