@@ -305,7 +305,7 @@ pub fn trajectory_map(
         10,
         y,
         &format!(
-            "grey markers: failures in no hotspot; red outlines: hotspots (dbscan eps {} m, {} points)",
+            "grey markers: failures in no hotspot, red outlines: hotspots (dbscan eps {} m, {} points)",
             hotspots.eps_m, hotspots.min_points
         ),
         1,
