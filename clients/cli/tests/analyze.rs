@@ -32,7 +32,7 @@ fn analyze_writes_tables_json_with_stable_fields_and_a_map() {
     let route = d.join("route.csv");
     write_route(&route);
     let mut nominal = Run::new("nominal", route_length() / 10.0 + 1.0);
-    nominal.steer = Some(Box::new(|k| if k % 2 == 0 { 0.1 } else { -0.1 }));
+    nominal.steer = Some(Box::new(|k| if k.is_multiple_of(2) { 0.1 } else { -0.1 }));
     nominal.write(&runs);
     collision_run("crash_a", 6.0).write(&runs);
     collision_run("crash_b", 6.3).write(&runs);

@@ -62,7 +62,7 @@ fn every_metric_of_synthetic_runs_matches_its_construction() {
     // Nominal: the whole route 0.5 m left of it, steering alternating +-0.05.
     let mut nominal = Run::new("nominal", l / 10.0 + 2.0);
     nominal.offset = Box::new(|_, _| 0.5);
-    nominal.steer = Some(Box::new(|k| if k % 2 == 0 { 0.05 } else { -0.05 }));
+    nominal.steer = Some(Box::new(|k| if k.is_multiple_of(2) { 0.05 } else { -0.05 }));
     let (_, nominal_last) = nominal.write(&runs_dir);
 
     // C-A1 s3: 1.0 m off for the first half, 1.5 m for the second; the steering pattern over
@@ -115,7 +115,7 @@ fn every_metric_of_synthetic_runs_matches_its_construction() {
     // Erratic start: steering +-0.5, barely moving, recording ends after 5 s.
     let mut erratic = Run::new("erratic", 5.0);
     erratic.s_of_t = Box::new(|t| 0.1 * t);
-    erratic.steer = Some(Box::new(|k| if k % 2 == 0 { 0.5 } else { -0.5 }));
+    erratic.steer = Some(Box::new(|k| if k.is_multiple_of(2) { 0.5 } else { -0.5 }));
     erratic.write(&runs_dir);
 
     let mut c = cfg(&dir);
@@ -288,7 +288,7 @@ fn events_switching_mid_run_split_it_into_segments() {
             Some((_, 4)) => 0.15,
             _ => 0.1,
         };
-        if k % 2 == 0 { a } else { -a }
+        if k.is_multiple_of(2) { a } else { -a }
     }));
     let (_, last) = r.write(&runs_dir);
     let a = analyze_dir(&runs_dir, &cfg(&dir)).unwrap();
@@ -395,7 +395,7 @@ fn near_field_coverage_counts_known_vehicles_detected_within_5_m() {
     let seen = move |drop: bool| {
         move |k: usize, _t: f64, ego: [f64; 2]| {
             let mut v = vec![[80.0, 10.0]];
-            if !(drop && k % 4 == 0) {
+            if !(drop && k.is_multiple_of(4)) {
                 v.push([car[0] - ego[0], car[1] - ego[1]]);
             }
             v
@@ -410,12 +410,12 @@ fn near_field_coverage_counts_known_vehicles_detected_within_5_m() {
     pert.write(&runs_dir);
     // Expected: messages with the car within 5 m of the vehicle (|dx| <= 4 at 3 m aside).
     let (mut expected, mut detected) = (0, 0);
-    for k in 0..90 {
+    for k in 0..90usize {
         let t = k as f64 / 10.0 + support::OBJECTS_SHIFT;
         let x = 10.0 * t;
         if (x - car[0]).hypot(car[1]) <= 5.0 {
             expected += 1;
-            if k % 4 != 0 {
+            if !k.is_multiple_of(4) {
                 detected += 1;
             }
         }

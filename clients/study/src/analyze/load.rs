@@ -382,6 +382,7 @@ pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
     let mut last = 0u64;
     let mut bad: BTreeMap<String, (usize, String)> = BTreeMap::new();
     let mut stream_state: BTreeMap<String, Option<(String, u8)>> = BTreeMap::new();
+    let mut other_streams: BTreeMap<String, usize> = BTreeMap::new();
     let mut current: Option<Condition> = None;
     let damage = bag.read(&wanted, &mut |m| {
         let t0 = *t0.get_or_insert(m.log_time);
@@ -477,7 +478,9 @@ pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
             };
             match ev {
                 Ok(ev) => {
-                    if cfg.event_streams.is_empty() || cfg.event_streams.contains(&ev.topic) {
+                    if !(cfg.event_streams.is_empty() || cfg.event_streams.contains(&ev.topic)) {
+                        *other_streams.entry(ev.topic.clone()).or_default() += 1;
+                    } else {
                         let state = match (ev.id, ev.severity) {
                             (Some(id), Some(s)) => Some((id, s)),
                             _ => None,
@@ -508,6 +511,13 @@ pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
     })?;
     if let Some(dmg) = damage {
         notes.push(format!("the bag is damaged; read up to the damage: {dmg}"));
+    }
+    if !cfg.event_streams.is_empty() && stream_state.is_empty() && !other_streams.is_empty() {
+        notes.push(format!(
+            "no event of the streams {} (the events name {}): the whole run counts as nominal",
+            cfg.event_streams.join(", "),
+            other_streams.keys().cloned().collect::<Vec<_>>().join(", ")
+        ));
     }
     for (topic, (n, first)) in bad {
         notes.push(format!(

@@ -155,6 +155,10 @@ pub const STEER_SHIFT: f64 = 0.05;
 pub const OBJECTS_SHIFT: f64 = 0.07;
 
 type F1 = Box<dyn Fn(f64) -> f64>;
+/// The condition at a time.
+type CondFn = Box<dyn Fn(f64) -> Option<(&'static str, u8)>>;
+/// Objects in the vehicle frame for message k at time t, the vehicle at a position.
+type ObjectsFn = Box<dyn Fn(usize, f64, [f64; 2]) -> Vec<[f64; 2]>>;
 
 /// A synthetic run.
 pub struct Run {
@@ -171,11 +175,11 @@ pub struct Run {
     /// Number of steering commands (default: all within the duration).
     pub steer_count: Option<usize>,
     /// The condition at time t: (ID, severity) or None for nominal; None: no events topic.
-    pub cond: Option<Box<dyn Fn(f64) -> Option<(&'static str, u8)>>>,
+    pub cond: Option<CondFn>,
     /// Collision flag true from this time on (Bool messages at 1 Hz, false before).
     pub collision_at: Option<f64>,
     /// Detected objects in the vehicle frame at time t (PoseArray on /objects).
-    pub objects: Option<Box<dyn Fn(usize, f64, [f64; 2]) -> Vec<[f64; 2]>>>,
+    pub objects: Option<ObjectsFn>,
     /// Pose topic as PoseStamped instead of Odometry.
     pub pose_stamped: bool,
     /// Leave out the pose topic.
