@@ -10,6 +10,7 @@
 //! [dds]
 //! backend = "rustdds"         # or "cyclone"
 //! domain_id = 0
+//! interfaces = ["lo"]         # names or IPv4 addresses; omitted: the DDS implementation's default
 //!
 //! [[ingress]]                 # ROS 2 topic -> <stream>/raw
 //! topic = "/sensing/camera/front/image_raw"
@@ -104,6 +105,22 @@ pub struct DdsSection {
     pub backend: BackendKind,
     /// Domain.
     pub domain_id: u16,
+    /// Network interfaces DDS may use (names like `lo`, `eth0`, or IPv4 addresses). Empty (the
+    /// default): the DDS implementation's own choice, as ROS 2 nodes on a vehicle expect.
+    /// `["lo"]` keeps every DDS packet on this computer (tests, benchmarks, an ADS on the same
+    /// computer whose DDS is also on loopback, e.g. with `ROS_LOCALHOST_ONLY=1`).
+    pub interfaces: Vec<String>,
+}
+
+impl DdsSection {
+    /// The participant this section describes.
+    pub fn participant(&self) -> crate::dds::ParticipantConfig {
+        crate::dds::ParticipantConfig {
+            backend: self.backend,
+            domain_id: self.domain_id,
+            interfaces: self.interfaces.clone(),
+        }
+    }
 }
 
 /// One `[[ingress]]` entry.
@@ -428,6 +445,15 @@ impl Config {
             }
             Ok(())
         };
+        if !self.ingress.is_empty() || !self.egress.is_empty() {
+            crate::dds::interfaces::resolve(&self.dds.interfaces).map_err(|e| {
+                let problem = match e {
+                    crate::dds::DdsError::Setup { reason, .. } => reason,
+                    other => other.to_string(),
+                };
+                err("dds.interfaces".into(), problem)
+            })?;
+        }
         let mut ingress_topics = BTreeSet::new();
         let mut sourced = BTreeSet::new();
         for (i, e) in self.ingress.iter().enumerate() {

@@ -63,6 +63,10 @@ enum Command {
         /// DDS backend for --ros-prefix.
         #[arg(long, default_value = "rustdds")]
         dds: String,
+        /// Network interface DDS may use for --ros-prefix (name or IPv4 address; repeatable;
+        /// default: the DDS implementation's choice). `lo` keeps it on this computer.
+        #[arg(long = "dds-interface")]
+        dds_interfaces: Vec<String>,
         /// Also record the streams into this bag directory.
         #[arg(long)]
         record: Option<PathBuf>,
@@ -149,10 +153,12 @@ fn command_config(cmd: &Command) -> Result<Config> {
             bus,
             ros_prefix,
             dds,
+            dds_interfaces,
             record,
         } => {
             cfg.bridge.bus = bus_kind(bus)?;
             cfg.dds.backend = dds.parse::<BackendKind>().map_err(anyhow::Error::msg)?;
+            cfg.dds.interfaces = dds_interfaces.clone();
             let mut map = std::collections::BTreeMap::new();
             for t in topics {
                 let (topic, stream) = match t.split_once('=') {

@@ -52,8 +52,7 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
     if !cfg.ingress.is_empty() {
         let dds: Arc<dyn DdsBackend> = Arc::from(
             dds::backend(
-                cfg.dds.backend,
-                cfg.dds.domain_id,
+                &cfg.dds.participant(),
                 &format!("{}_ingress", cfg.bridge.name),
             )
             .context("dds (ingress participant)")?,
@@ -82,8 +81,7 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
     if !cfg.egress.is_empty() {
         let dds: Arc<dyn DdsBackend> = Arc::from(
             dds::backend(
-                cfg.dds.backend,
-                cfg.dds.domain_id,
+                &cfg.dds.participant(),
                 &format!("{}_egress", cfg.bridge.name),
             )
             .context("dds (egress participant)")?,
