@@ -24,6 +24,7 @@
 //! # Ok::<(), perturb_bag::BagError>(())
 //! ```
 
+pub mod dynamic;
 pub mod events;
 mod read;
 pub mod ros1;
