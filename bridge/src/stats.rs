@@ -32,23 +32,20 @@ impl Latency {
         &self.samples
     }
 
-    /// The summary (nearest-rank percentiles).
+    /// The summary (percentiles by [`perturb_core::percentile`]).
     pub fn summary(&self) -> Summary {
         summarize(&self.samples)
     }
 }
 
-/// Nearest-rank percentiles of `ns` samples, in ms.
+/// Percentiles of `ns` samples in ms, by the project's one definition ([`perturb_core::percentile`]).
 pub fn summarize(ns: &[u64]) -> Summary {
     if ns.is_empty() {
         return Summary::default();
     }
     let mut v = ns.to_vec();
     v.sort_unstable();
-    let pct = |p: f64| {
-        let rank = ((p / 100.0) * v.len() as f64).ceil().max(1.0) as usize;
-        v[rank.min(v.len()) - 1] as f64 / 1e6
-    };
+    let pct = |p: f64| perturb_core::percentile::of_sorted(&v, p / 100.0).unwrap_or(0) as f64 / 1e6;
     Summary {
         n: v.len(),
         p50_ms: pct(50.0),

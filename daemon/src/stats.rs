@@ -76,7 +76,8 @@ impl Histogram {
         if self.count == 0 {
             return 0;
         }
-        let rank = ((q * self.count as f64).ceil() as u64).clamp(1, self.count);
+        // the bucket of the sample of nearest rank (perturb_core::percentile)
+        let rank = perturb_core::percentile::rank(self.count as usize, q) as u64;
         let mut seen = 0;
         for (i, &c) in self.counts.iter().enumerate() {
             seen += c;

@@ -33,7 +33,7 @@ pub struct Timing {
     pub max_ms: f64,
 }
 
-/// Summary statistics of a list of durations.
+/// Summary statistics of a list of durations (percentiles by [`crate::percentile`]).
 pub fn summarize(
     id: &'static str,
     name: &'static str,
@@ -44,12 +44,7 @@ pub fn summarize(
     samples.sort();
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
     let n = samples.len().max(1);
-    let pick = |q: f64| {
-        samples
-            .get(((samples.len() as f64 - 1.0) * q).round() as usize)
-            .copied()
-            .unwrap_or_default()
-    };
+    let pick = |q: f64| crate::percentile::of_sorted(samples, q).unwrap_or_default();
     Timing {
         id,
         name,

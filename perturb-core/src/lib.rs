@@ -20,6 +20,7 @@ pub mod formats;
 pub mod image;
 pub mod lidar;
 pub mod metrics;
+pub mod percentile;
 pub mod perturber;
 pub mod registry;
 pub mod rng;

@@ -32,13 +32,7 @@ pub struct HilResult {
 fn summarize(e: &Entry, severity: u8, v: &mut [f64]) -> Timing {
     v.sort_by(f64::total_cmp);
     let n = v.len();
-    let at = |p: f64| {
-        if n == 0 {
-            f64::NAN
-        } else {
-            v[((n - 1) as f64 * p).round() as usize]
-        }
-    };
+    let at = |p: f64| perturb_core::percentile::of_sorted(v, p).unwrap_or(f64::NAN);
     Timing {
         id: e.id,
         name: e.name,

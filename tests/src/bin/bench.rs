@@ -96,11 +96,7 @@ fn kitti_cloud() -> Cloud {
 }
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * p).round() as usize]
+    perturb_core::percentile::of_f64(v, p)
 }
 
 /// CPU seconds (user + system) a process has used, from /proc.
