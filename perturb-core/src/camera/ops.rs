@@ -20,6 +20,20 @@ where
         .for_each(|(y, out)| f(y, input.row(y), out));
 }
 
+/// [`par_rows`] with per-worker state: `init()` makes a worker's state (row buffers), which
+/// `f(state, y, input_row, output_row)` reuses from row to row.
+pub fn par_rows_with<T, I, F>(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, init: I, f: F)
+where
+    I: Fn() -> T + Send + Sync,
+    F: Fn(&mut T, usize, &[u8], &mut [u8]) + Send + Sync,
+{
+    let rows = output.rows_mut();
+    rows.into_par_iter()
+        .with_min_len(ROWS_PER_TASK)
+        .enumerate()
+        .for_each_init(init, |state, (y, out)| f(state, y, input.row(y), out));
+}
+
 /// Whether the functions defined with `wide_fn!` run their AVX2 copy: on x86-64 CPUs that have
 /// AVX2, FMA, BMI1, BMI2 and LZCNT (the x86-64-v3 level, every x86-64 CPU since about 2015),
 /// unless [`force_baseline`] is on. The check is a few cached loads.
@@ -163,6 +177,26 @@ pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
         let planes = r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut());
         for (((r, g), b), p) in planes.zip(src.chunks_exact(C)) {
             (*r, *g, *b) = (p[R] as f32, p[G] as f32, p[B] as f32);
+        }
+    }
+    match format {
+        PixelFormat::Rgb8 => each::<3, 0, 1, 2>(src, [r, g, b]),
+        PixelFormat::Bgr8 => each::<3, 2, 1, 0>(src, [r, g, b]),
+        PixelFormat::Rgba8 => each::<4, 0, 1, 2>(src, [r, g, b]),
+        PixelFormat::Bgra8 => each::<4, 2, 1, 0>(src, [r, g, b]),
+        PixelFormat::Mono8 => each::<1, 0, 0, 0>(src, [r, g, b]),
+    }
+}
+
+/// [`split_rgb`] into planes of bytes.
+pub fn split_rgb_bytes(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [u8]; 3]) {
+    fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
+        src: &[u8],
+        [r, g, b]: [&mut [u8]; 3],
+    ) {
+        let planes = r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut());
+        for (((r, g), b), p) in planes.zip(src.chunks_exact(C)) {
+            (*r, *g, *b) = (p[R], p[G], p[B]);
         }
     }
     match format {
