@@ -169,6 +169,7 @@ pub fn pad_row_copy<T: Copy>(src: &[T], c: usize, r: usize, dst: &mut [T]) {
 /// Splits a row of colour pixels of `format` into three planes of floats, red, green and blue
 /// (mono8: the grey value in all three). Each format gets its own loop with the channel positions
 /// known at compile time, which lets the compiler vectorise it.
+#[inline(always)]
 pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         src: &[u8],
@@ -189,6 +190,7 @@ pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
 }
 
 /// [`split_rgb`] into planes of bytes.
+#[inline(always)]
 pub fn split_rgb_bytes(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [u8]; 3]) {
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         src: &[u8],
@@ -211,6 +213,7 @@ pub fn split_rgb_bytes(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [u8]; 3
 /// Writes three planes of bytes, red, green and blue, into the colour channels of a row of
 /// `format` pixels; alpha is left as it is. Mono8 takes the red plane. The counterpart of
 /// [`split_rgb`].
+#[inline(always)]
 pub fn merge_rgb(format: PixelFormat, [r, g, b]: [&[u8]; 3], dst: &mut [u8]) {
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         [r, g, b]: [&[u8]; 3],
@@ -715,6 +718,24 @@ pub fn frame_buffer(len: usize) -> Vec<f32> {
     match reused {
         Some(mut b) => {
             b.clear();
+            b.resize(len, 0.0);
+            b
+        }
+        None => vec![0f32; len],
+    }
+}
+
+/// A buffer of `len` samples for a caller that overwrites every one of them: a finished frame's
+/// buffer is reused as it is (its old samples left in place), saving the zeroing of
+/// [`frame_buffer`].
+pub fn frame_buffer_overwritten(len: usize) -> Vec<f32> {
+    let reused = SPARE.lock().ok().and_then(|mut spare| {
+        let i = spare.iter().position(|b| b.capacity() >= len)?;
+        Some(spare.swap_remove(i))
+    });
+    match reused {
+        Some(mut b) => {
+            b.truncate(len);
             b.resize(len, 0.0);
             b
         }
