@@ -220,8 +220,11 @@ class Result:
     pair: Pair
     ours: dict[int, float] = field(default_factory=dict)
     peer: dict[int, float] = field(default_factory=dict)
+    failed: str = ""  # why the peer could not run (then the pair has no ratios)
 
     def ratios(self) -> dict[int, float]:
+        if self.failed:
+            return {}
         return {s: self.ours[s] / self.peer[s] for s in self.ours if s in self.peer and self.peer[s] > 0}
 
 
@@ -295,8 +298,14 @@ def main() -> int:
                         if s in sevs:
                             r.ours[s] = min(r.ours.get(s, math.inf), ms)
                     for s in sevs:
-                        fn = r.pair.make(s - 1)
-                        ms = time_peer(fn, rgb, a.repeat, a.budget)
+                        try:
+                            fn = r.pair.make(s - 1)
+                            ms = time_peer(fn, rgb, a.repeat, a.budget)
+                        except Exception as e:  # a peer broken by its own dependencies
+                            r.failed = f"{type(e).__name__}: {e}"
+                            print(f"note: {r.pair.peer} {r.pair.label} failed ({r.failed}); pair skipped",
+                                  file=sys.stderr)
+                            break
                         r.peer[s] = min(r.peer.get(s, math.inf), ms)
                 ours_cache.clear()
             report["sizes"][size] = {"copy_ms": copy_ms, "rows": results}
@@ -364,6 +373,9 @@ def print_report(report: dict, fmt: str) -> None:
             gm = math.exp(sum(math.log(x) for x in rs) / len(rs))
             print(f"{size} {peer}: geometric mean of ours/peer over {len(rs)} pairs {gm:.3f} ({1 / gm:.1f}x faster)")
         print(f"{size}: pairs where ours is slower at some severity: {', '.join(slower) if slower else 'none'}")
+        broken = [f"{r.pair.ours} vs {r.pair.peer} {r.pair.label} ({r.failed})" for r in d["rows"] if r.failed]
+        if broken:
+            print(f"{size}: peers that failed to run: {'; '.join(broken)}")
 
 
 if __name__ == "__main__":
