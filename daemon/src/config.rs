@@ -76,6 +76,12 @@ pub struct StreamConfig {
     /// falls behind, the oldest waiting frame is dropped and counted.
     #[serde(default = "default_queue_depth")]
     pub queue_depth: usize,
+    /// Worker threads of this stream's frame work (absent: the process-wide pool, one thread per
+    /// core, shared by every stream). A stream whose perturbation needs several cores to fit its
+    /// budget (`perturb bench` says how many) gets its own pool of this many threads, so other
+    /// streams cannot take them.
+    #[serde(default)]
+    pub threads: Option<usize>,
     /// The perturbation active from the start (absent: frames are forwarded unchanged).
     #[serde(default)]
     pub perturbation: Option<PerturbationConfig>,
@@ -83,6 +89,9 @@ pub struct StreamConfig {
     #[serde(default)]
     pub qos: StreamQos,
 }
+
+/// The most worker threads one stream may ask for.
+pub const MAX_STREAM_THREADS: usize = 256;
 
 fn default_queue_depth() -> usize {
     2
@@ -258,6 +267,14 @@ impl Config {
                     s.queue_depth
                 ));
             }
+            if let Some(n) = s.threads
+                && !(1..=MAX_STREAM_THREADS).contains(&n)
+            {
+                return Err(format!(
+                    "{}: {n} must be between 1 and {MAX_STREAM_THREADS}",
+                    key("threads")
+                ));
+            }
             s.qos
                 .validate()
                 .map_err(|e| format!("{}: {e}", key("qos")))?;
@@ -335,6 +352,9 @@ mod tests {
         assert_eq!(c.streams[1].output_service(), "lidar/perturbed");
         assert_eq!(c.streams[1].budget(), 200.0);
         assert_eq!(c.daemon.control_service, "perturb/control");
+        assert_eq!(c.streams[0].threads, None);
+        let c = Config::parse(&format!("{GOOD}\nthreads = 4\n")).unwrap();
+        assert_eq!(c.streams[1].threads, Some(4));
     }
 
     fn err(text: &str) -> String {
@@ -368,6 +388,11 @@ mod tests {
         );
         let e = err(&format!("{GOOD}\nqueue_depth = 5\n"));
         assert!(e.contains("queue_depth"), "{e}");
+        let e = err(&format!("{GOOD}\nthreads = 0\n"));
+        assert!(
+            e.contains("streams[1] (lidar).threads") && e.contains("between 1"),
+            "{e}"
+        );
         let e = err("[daemon]\n");
         assert!(e.contains("streams"), "{e}");
         let e = err(&GOOD.replace("modality = \"lidar\"", "modality = \"radar\""));

@@ -93,10 +93,10 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
         let input = transport
             .subscriber(&s.input_service(), &s.qos, None)
             .map_err(|e| anyhow::anyhow!("stream `{}` input: {e}", s.name))?;
-        let rt = Arc::new(StreamRuntime::new(
-            s.clone(),
-            initial.as_ref().map(|a| a.spec()),
-        ));
+        let rt = Arc::new(
+            StreamRuntime::new(s.clone(), initial.as_ref().map(|a| a.spec()))
+                .map_err(|e| anyhow::anyhow!("stream `{}` worker threads: {e}", s.name))?,
+        );
         info!(
             stream = s.name.as_str(),
             modality = s.modality.as_str(),
@@ -108,6 +108,7 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
                 .map(|a| format!("{} severity {} seed {}", a.spec().entry.id, a.spec().severity, a.spec().seed))
                 .unwrap_or_else(|| "off".into()),
             budget_ms = s.budget(),
+            worker_threads = rt.worker_threads(),
             "stream configured"
         );
         ports.push((rt.clone(), input, output, initial));

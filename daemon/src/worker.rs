@@ -52,13 +52,31 @@ pub struct StreamRuntime {
     control: Mutex<ControlState>,
     has_pending: AtomicBool,
     geometry: Mutex<Option<ImageGeometry>>,
+    /// The stream's own worker threads (`threads` in its configuration); `None`: the global pool.
+    pool: Option<rayon::ThreadPool>,
 }
 
 impl StreamRuntime {
-    /// A stream with its initial perturbation (already built).
-    pub fn new(config: StreamConfig, initial: Option<Spec>) -> Self {
+    /// A stream with its initial perturbation (already built), and its own pool of worker
+    /// threads when its configuration asks for one.
+    pub fn new(
+        config: StreamConfig,
+        initial: Option<Spec>,
+    ) -> Result<Self, rayon::ThreadPoolBuildError> {
         let seed = config.initial_seed();
-        StreamRuntime {
+        let pool = match config.threads {
+            Some(n) => {
+                let name = config.name.clone();
+                Some(
+                    rayon::ThreadPoolBuilder::new()
+                        .num_threads(n)
+                        .thread_name(move |i| format!("w{i}-{name}"))
+                        .build()?,
+                )
+            }
+            None => None,
+        };
+        Ok(StreamRuntime {
             config,
             stats: StreamStats::default(),
             control: Mutex::new(ControlState {
@@ -68,7 +86,25 @@ impl StreamRuntime {
             }),
             has_pending: AtomicBool::new(false),
             geometry: Mutex::new(None),
+            pool,
+        })
+    }
+
+    /// Runs a perturbation's frame work on the stream's worker threads: its own pool when it has
+    /// one, the global pool otherwise.
+    fn on_workers<R: Send>(&self, work: impl FnOnce() -> R + Send) -> R {
+        match &self.pool {
+            Some(pool) => pool.install(work),
+            None => work(),
         }
+    }
+
+    /// Worker threads the stream's frame work runs on.
+    pub fn worker_threads(&self) -> usize {
+        self.pool.as_ref().map_or_else(
+            rayon::current_num_threads,
+            rayon::ThreadPool::current_num_threads,
+        )
     }
 
     fn lock_control(&self) -> std::sync::MutexGuard<'_, ControlState> {
@@ -545,7 +581,7 @@ fn camera(
         Some(Active::Camera(p)) => {
             let result = {
                 let mut out = h.image_view_mut(loan.payload_mut())?;
-                p.apply(&input, &mut out, h.seq)
+                rt.on_workers(|| p.apply(&input, &mut out, h.seq))
             };
             match result {
                 Ok(()) => {
@@ -595,7 +631,8 @@ fn lidar(
         let max = p.max_output_bytes(&input);
         let mut loan = publisher.loan(max.max(1))?;
         *loan.header_mut() = *h;
-        match p.apply(&input, loan.payload_mut(), h.seq, None) {
+        let payload = loan.payload_mut();
+        match rt.on_workers(|| p.apply(&input, payload, h.seq, None)) {
             Ok(shape) => {
                 let spec = p.spec();
                 let hd = loan.header_mut();
@@ -614,4 +651,34 @@ fn lidar(
     loan.header_mut().set_applied(None);
     loan.payload_mut()[..len].copy_from_slice(data);
     Ok(Some(loan))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+
+    fn stream(extra: &str) -> StreamConfig {
+        let text = format!("[[streams]]\nname = \"cam\"\nmodality = \"camera\"\n{extra}");
+        Config::parse(&text).unwrap().streams.remove(0)
+    }
+
+    #[test]
+    fn a_stream_with_threads_runs_its_frame_work_on_a_pool_of_that_size() {
+        let rt = StreamRuntime::new(stream("threads = 3\n"), None).unwrap();
+        assert_eq!(rt.worker_threads(), 3);
+        let (n, name) = rt.on_workers(|| {
+            let inner = rayon::join(|| std::thread::current().name().map(str::to_owned), || ());
+            (rayon::current_num_threads(), inner.0)
+        });
+        assert_eq!(n, 3);
+        assert!(name.is_some_and(|n| n.ends_with("-cam")));
+        // Without `threads` the work stays on the caller's (global) pool.
+        let rt = StreamRuntime::new(stream(""), None).unwrap();
+        assert_eq!(
+            rt.on_workers(rayon::current_num_threads),
+            rayon::current_num_threads()
+        );
+        assert_eq!(rt.worker_threads(), rayon::current_num_threads());
+    }
 }

@@ -4,7 +4,8 @@
 //! cargo run --release -p perturb-core --example bench -- camera 1920 1208 [ID ...]
 //! cargo run --release -p perturb-core --example bench -- lidar [ID ...]
 //! ```
-//! The data comes from `../shared/data` (or `$PERTURB_SHARED_DATA`). `perturb bench` is the full
+//! The data comes from `../shared/data` (or `$PERTURB_SHARED_DATA`); `PERTURB_BENCH_FRAMES` sets
+//! the frames timed per severity (default 10). `perturb bench` is the full
 //! report; this example is the quick loop while working on one perturbation.
 
 use perturb_core::bench::{Timing, time_camera, time_lidar};
@@ -21,6 +22,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .unwrap_or_else(|| PathBuf::from("../shared/data"));
     let modality = args.first().map(String::as_str).unwrap_or("camera");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    // Frames timed per perturbation and severity (the median is reported).
+    let frames: usize = std::env::var("PERTURB_BENCH_FRAMES").map_or(Ok(10), |s| s.parse())?;
     let mut rows: Vec<Timing> = Vec::new();
     if modality == "camera" {
         let w: u32 = args.get(1).map_or(Ok(1920), |s| s.parse())?;
@@ -33,7 +36,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 continue;
             }
             for s in e.severities() {
-                rows.push(pool.install(|| time_camera(e, s, 1, &frame.view(), 10))?);
+                rows.push(pool.install(|| time_camera(e, s, 1, &frame.view(), frames))?);
             }
         }
     } else {
@@ -45,7 +48,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 continue;
             }
             for s in e.severities() {
-                rows.push(pool.install(|| time_lidar(e, s, 1, &sensor, &scan.view(), 10))?);
+                rows.push(pool.install(|| time_lidar(e, s, 1, &sensor, &scan.view(), frames))?);
             }
         }
     }

@@ -1,6 +1,7 @@
 //! Colour and tone family (C-F): changes of hue, saturation and tone.
 
-use super::ops::{apply_lut, byte, map_saturation, map_value, par_rows, wide_fn};
+use super::ops::{byte, map_saturation, map_value, par_rows, wide_fn};
+use super::pointwise::{ByteMap, ChannelMix, GainBlend, LumaBlend, channel_sums};
 use super::{CameraBuilder, CameraPerturbation, CameraSetup};
 use crate::error::Error;
 use crate::image::{ImageView, ImageViewMut};
@@ -22,11 +23,15 @@ pub(crate) fn refuse_mono(id: &'static str, s: &CameraSetup) -> Result<(), Error
 pub const GRAYSCALE_WEIGHT: [f32; 5] = [0.10, 0.20, 0.35, 0.55, 0.85];
 
 /// C-F5 grayscale: `out = (1 - s) I + s Y` per colour channel with `Y = .299 R + .587 G + .114 B`,
-/// in 8.8 fixed point (two 256-entry tables for the two terms), rounded; alpha is copied. Mono8 input
-/// is refused: it is already grey, so the perturbation would do nothing.
+/// in 8.8 fixed point (two 256-entry tables for the two terms), rounded; alpha is copied. The
+/// tables are computed as 16.16 fixed-point lines in 32-bit lanes (same bytes, see
+/// [`LumaBlend`]). Mono8 input is refused: it is already grey, so the perturbation would do
+/// nothing.
 pub struct Grayscale {
     keep: [u16; 256],
     luma: [u16; 256],
+    /// The tables as 16.16 fixed-point lines (same bytes; found for every severity).
+    fast: Option<LumaBlend>,
 }
 
 /// Registry constructor of C-F5.
@@ -39,9 +44,12 @@ impl Grayscale {
     /// Configures the blend weight for the severity.
     pub fn new(setup: &CameraSetup) -> Self {
         let w = GRAYSCALE_WEIGHT[setup.level()];
+        let keep = std::array::from_fn(|v| ((1.0 - w) * v as f32 * 256.0).round() as u16);
+        let luma = std::array::from_fn(|v| (w * v as f32 * 256.0).round() as u16);
         Grayscale {
-            keep: std::array::from_fn(|v| ((1.0 - w) * v as f32 * 256.0).round() as u16),
-            luma: std::array::from_fn(|v| (w * v as f32 * 256.0).round() as u16),
+            keep,
+            luma,
+            fast: LumaBlend::fit(&keep, &luma),
         }
     }
 }
@@ -49,6 +57,9 @@ impl Grayscale {
 impl CameraPerturbation for Grayscale {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
         let format = input.format;
+        if let Some(fast) = &self.fast {
+            return par_rows(input, output, |_, src, dst| fast.row(format, src, dst));
+        }
         let [ri, gi, bi] = format.rgb_offsets();
         let c = format.channels();
         par_rows(input, output, |_, src, dst| {
@@ -118,21 +129,24 @@ pub fn posterize_lut(levels: u32) -> [u8; 256] {
 }
 
 /// C-F7 posterize: the reference's lookup table per channel (works on mono8 too). At s4 (L = 8)
-/// the table has 9 output levels and at s5 (L = 4) {0, 85, 170, 255}, as in the reference.
+/// the table has 9 output levels and at s5 (L = 4) {0, 85, 170, 255}, as in the reference. The
+/// table is computed as its staircase in 16-bit integer arithmetic (same bytes, see
+/// [`ByteMap::steps`]).
 pub struct Posterize {
-    lut: [u8; 256],
+    map: ByteMap,
 }
 
 /// Registry constructor of C-F7.
 pub const POSTERIZE: CameraBuilder = |s| {
+    let levels = POSTERIZE_LEVELS[s.level()];
     Ok(Box::new(Posterize {
-        lut: posterize_lut(POSTERIZE_LEVELS[s.level()]),
+        map: ByteMap::steps(posterize_lut(levels), levels, 255 / (levels - 1)),
     }))
 };
 
 impl CameraPerturbation for Posterize {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
-        apply_lut(input, output, &self.lut);
+        self.map.apply(input, output);
     }
 }
 
@@ -142,7 +156,9 @@ pub const WHITE_BALANCE_WEIGHT: [f32; 5] = [0.10, 0.25, 0.50, 0.75, 0.99];
 
 /// C-F4 white_balance: gray-world balance: each channel scaled by `mean(all channels) /
 /// mean(channel)` (clipped, truncated to 8 bits as the reference), then `out = (1 - s) I + s WB`.
-/// The channel means are measured on each frame (one pass), the rest is a per-channel table.
+/// The channel means are measured on each frame (one pass), the rest is a per-channel table,
+/// computed as fixed-point arithmetic where that gives the table's bytes (checked on each frame,
+/// see [`GainBlend`]).
 /// Mono8 is refused (a single channel is always balanced).
 pub struct WhiteBalance {
     weight: f32,
@@ -164,29 +180,26 @@ impl CameraPerturbation for WhiteBalance {
         let [ri, gi, bi] = format.rgb_offsets();
         let sums = (0..input.height as usize)
             .into_par_iter()
-            .map(|y| {
-                let mut s = [0u64; 3];
-                for p in input.row(y).chunks_exact(c) {
-                    s[0] += p[ri] as u64;
-                    s[1] += p[gi] as u64;
-                    s[2] += p[bi] as u64;
-                }
-                s
-            })
+            .with_min_len(16)
+            .map(|y| channel_sums(input.row(y), c, [ri, gi, bi]))
             .reduce(|| [0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]]);
         let n = (input.width as f64 * input.height as f64).max(1.0);
         let means = sums.map(|v| v as f64 / n);
         let all = (means[0] + means[1] + means[2]) / 3.0;
         let w = self.weight as f64;
+        let gains = means.map(|m| if m > 0.0 { all / m } else { 1.0 });
         let luts: [[u8; 256]; 3] = std::array::from_fn(|k| {
-            let gain = if means[k] > 0.0 { all / means[k] } else { 1.0 };
             std::array::from_fn(|v| {
-                let balanced = (v as f64 * gain).min(255.0).floor();
+                let balanced = (v as f64 * gains[k]).min(255.0).floor();
                 ((1.0 - w) * v as f64 + w * balanced)
                     .round()
                     .clamp(0.0, 255.0) as u8
             })
         });
+        // The tables as fixed-point arithmetic where that gives their bytes (checked per frame).
+        if let Some(fast) = GainBlend::fit(gains, w, &luts) {
+            return par_rows(input, output, |_, src, dst| fast.row(format, src, dst));
+        }
         par_rows(input, output, |_, src, dst| {
             for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
                 q[ri] = luts[0][p[ri] as usize];
@@ -229,31 +242,9 @@ pub const FALSE_COLOR: CameraBuilder = |s| {
 
 impl CameraPerturbation for FalseColor {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
-        let format = input.format;
-        let c = format.channels();
-        let mode = self.mode;
-        par_rows(input, output, |_, src, dst| {
-            for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
-                let (a, b, d) = (p[0], p[1], p[2]);
-                let (x, y, z) = match mode {
-                    0 => (b, d, a),
-                    1 => (b, a, d),
-                    2 => (d, b, a),
-                    3 => (255 - a, 255 - b, 255 - d),
-                    _ => (
-                        ((a as u16 + b as u16) / 2) as u8,
-                        ((b as u16 + d as u16) / 2) as u8,
-                        ((d as u16 + a as u16) / 2) as u8,
-                    ),
-                };
-                q[0] = x;
-                q[1] = y;
-                q[2] = z;
-                if c == 4 {
-                    q[3] = p[3];
-                }
-            }
-        });
+        let c = input.format.channels();
+        let mix = ChannelMix::ALL[self.mode];
+        par_rows(input, output, |_, src, dst| mix.row(c, src, dst));
     }
 }
 

@@ -14,6 +14,7 @@ pub mod distortion;
 pub mod noise;
 pub mod ops;
 pub mod pattern;
+pub mod pointwise;
 pub mod texture;
 pub mod weather;
 

@@ -8,7 +8,8 @@
 #[cfg(test)]
 use super::CameraSetup;
 use super::ops::{
-    byte, copy_alpha, frame_buffer, merge_rgb, par_rows, recycle, row_rng, split_rgb, wide_fn,
+    byte, copy_alpha, frame_buffer, frame_buffer_overwritten, merge_rgb, par_rows, recycle,
+    row_rng, split_rgb, wide_fn,
 };
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
@@ -334,66 +335,150 @@ fn round_f32(x: f32) -> f32 {
     (x + MAGIC) - MAGIC
 }
 
-/// `M B` for the DCT matrix `M` and a block `B` whose rows are 8-wide vectors, with the even-odd
-/// split of the DCT-II: rows k and 7 - k enter the even outputs as their sum and the odd ones as
-/// their difference (`m[u][7 - k] = +-m[u][k]`), half the multiplications of the plain product.
+/// `M B` for the DCT matrix `M` and every 8x8 block `B` of a band (8 rows of `pw` samples),
+/// into `out`: the vertical transform of all the band's blocks at once, as long loops over the
+/// band's width. With the even-odd split of the DCT-II: rows k and 7 - k enter the even outputs as
+/// their sum and the odd ones as their difference (`m[u][7 - k] = +-m[u][k]`), half the
+/// multiplications of the plain product; each output sums its four products in order from zero.
+/// `scratch` holds 8 rows.
 #[inline(always)]
-fn dct8(m: &Block, b: &Block) -> Block {
-    let mut sum = [[0f32; 8]; 4];
-    let mut diff = [[0f32; 8]; 4];
+fn dct_columns(m: &Block, band: &[f32], pw: usize, scratch: &mut [f32], out: &mut [f32]) {
+    let row = |r: usize| &band[r * pw..(r + 1) * pw];
+    let (sums, diffs) = scratch.split_at_mut(4 * pw);
     for k in 0..4 {
-        for l in 0..8 {
-            sum[k][l] = b[k][l] + b[7 - k][l];
-            diff[k][l] = b[k][l] - b[7 - k][l];
+        let (a, b) = (row(k), row(7 - k));
+        let s = &mut sums[k * pw..(k + 1) * pw];
+        let d = &mut diffs[k * pw..(k + 1) * pw];
+        for (((s, d), a), b) in s.iter_mut().zip(d.iter_mut()).zip(a).zip(b) {
+            *s = a + b;
+            *d = a - b;
         }
     }
-    let mut out = [[0f32; 8]; 8];
-    for (u, o) in out.iter_mut().enumerate() {
-        let half = if u % 2 == 0 { &sum } else { &diff };
-        for (k, row) in half.iter().enumerate() {
-            let mv = m[u][k];
-            for (ov, rv) in o.iter_mut().zip(row) {
-                *ov += mv * rv;
-            }
+    for (u, o) in out.chunks_exact_mut(pw).take(8).enumerate() {
+        let half = if u % 2 == 0 { &*sums } else { &*diffs };
+        let (h0, rest) = half.split_at(pw);
+        let (h1, rest) = rest.split_at(pw);
+        let (h2, h3) = rest.split_at(pw);
+        let [m0, m1, m2, m3] = [m[u][0], m[u][1], m[u][2], m[u][3]];
+        for ((((o, a), b), c), d) in o.iter_mut().zip(h0).zip(h1).zip(h2).zip(&h3[..pw]) {
+            let mut acc = 0.0f32;
+            acc += m0 * a;
+            acc += m1 * b;
+            acc += m2 * c;
+            acc += m3 * d;
+            *o = acc;
         }
     }
-    out
 }
 
-/// `M^T C` (the inverse DCT) for the DCT matrix `M` and a block `C` of 8-wide rows: the even and
-/// odd coefficients' sums for outputs x < 4 give outputs x and 7 - x as their sum and difference.
+/// `M^T C` (the inverse DCT) for the DCT matrix `M` and every 8x8 block `C` of a band, into
+/// `out`, as long loops over the band's width: the even and odd coefficients' sums (each in
+/// order from zero) for outputs x < 4 give outputs x and 7 - x as their sum and difference.
 #[inline(always)]
-fn idct8(m: &Block, c: &Block) -> Block {
-    let mut out = [[0f32; 8]; 8];
+fn idct_columns(m: &Block, band: &[f32], pw: usize, out: &mut [f32]) {
+    let row = |u: usize| &band[u * pw..(u + 1) * pw];
+    let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+    let (r4, r5, r6, r7) = (row(4), row(5), row(6), row(7));
     for x in 0..4 {
-        let (mut even, mut odd) = ([0f32; 8], [0f32; 8]);
-        for (u, row) in c.iter().enumerate() {
-            let (acc, mv) = if u % 2 == 0 {
-                (&mut even, m[u][x])
-            } else {
-                (&mut odd, m[u][x])
-            };
-            for (a, rv) in acc.iter_mut().zip(row) {
-                *a += mv * rv;
-            }
-        }
-        for l in 0..8 {
-            out[x][l] = even[l] + odd[l];
-            out[7 - x][l] = even[l] - odd[l];
+        let (top, bottom) = out.split_at_mut((7 - x) * pw);
+        let (o1, o2) = (&mut top[x * pw..(x + 1) * pw], &mut bottom[..pw]);
+        let mx: [f32; 8] = std::array::from_fn(|u| m[u][x]);
+        // Every row sliced to the same length: the loop runs without bounds checks.
+        let (o1, o2) = (&mut o1[..pw], &mut o2[..pw]);
+        let (r0, r1, r2, r3) = (&r0[..pw], &r1[..pw], &r2[..pw], &r3[..pw]);
+        let (r4, r5, r6, r7) = (&r4[..pw], &r5[..pw], &r6[..pw], &r7[..pw]);
+        for l in 0..pw {
+            let (mut even, mut odd) = (0.0f32, 0.0f32);
+            even += mx[0] * r0[l];
+            odd += mx[1] * r1[l];
+            even += mx[2] * r2[l];
+            odd += mx[3] * r3[l];
+            even += mx[4] * r4[l];
+            odd += mx[5] * r5[l];
+            even += mx[6] * r6[l];
+            odd += mx[7] * r7[l];
+            o1[l] = even + odd;
+            o2[l] = even - odd;
         }
     }
-    out
 }
 
+/// Transposes every 8x8 block of a band in place.
+#[inline(always)]
+fn transpose_blocks(band: &mut [f32], pw: usize) {
+    for bx in 0..pw / 8 {
+        let at = |y: usize| y * pw + bx * 8..y * pw + bx * 8 + 8;
+        let mut blk = [[0f32; 8]; 8];
+        for (y, row) in blk.iter_mut().enumerate() {
+            *row = band[at(y)].try_into().expect("8 samples");
+        }
+        for (y, row) in transpose8(&blk).iter().enumerate() {
+            band[at(y)].copy_from_slice(row);
+        }
+    }
+}
+
+/// The transpose of an 8x8 block, in three stages of two-row shuffles (interleave pairs, then
+/// pairs of pairs, then halves): each stage is one shuffle instruction per row when the rows are
+/// vectors, where an element-by-element transpose goes through memory.
 #[inline(always)]
 fn transpose8(a: &Block) -> Block {
-    let mut t = [[0f32; 8]; 8];
-    for (i, row) in a.iter().enumerate() {
-        for (j, v) in row.iter().enumerate() {
-            t[j][i] = *v;
-        }
+    #[inline(always)]
+    fn lo(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
+        [x[0], y[0], x[1], y[1], x[4], y[4], x[5], y[5]]
     }
-    t
+    #[inline(always)]
+    fn hi(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
+        [x[2], y[2], x[3], y[3], x[6], y[6], x[7], y[7]]
+    }
+    #[inline(always)]
+    fn lo2(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
+        [x[0], x[1], y[0], y[1], x[4], x[5], y[4], y[5]]
+    }
+    #[inline(always)]
+    fn hi2(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
+        [x[2], x[3], y[2], y[3], x[6], x[7], y[6], y[7]]
+    }
+    #[inline(always)]
+    fn lo4(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
+        [x[0], x[1], x[2], x[3], y[0], y[1], y[2], y[3]]
+    }
+    #[inline(always)]
+    fn hi4(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
+        [x[4], x[5], x[6], x[7], y[4], y[5], y[6], y[7]]
+    }
+    // After stage 1, t[2i] and t[2i+1] interleave rows 2i and 2i+1.
+    let t = [
+        lo(&a[0], &a[1]),
+        hi(&a[0], &a[1]),
+        lo(&a[2], &a[3]),
+        hi(&a[2], &a[3]),
+        lo(&a[4], &a[5]),
+        hi(&a[4], &a[5]),
+        lo(&a[6], &a[7]),
+        hi(&a[6], &a[7]),
+    ];
+    // After stage 2, u[k] (k < 4) holds columns k and k + 4 of rows 0-3, u[k + 4] of rows 4-7.
+    let u = [
+        lo2(&t[0], &t[2]),
+        hi2(&t[0], &t[2]),
+        lo2(&t[1], &t[3]),
+        hi2(&t[1], &t[3]),
+        lo2(&t[4], &t[6]),
+        hi2(&t[4], &t[6]),
+        lo2(&t[5], &t[7]),
+        hi2(&t[5], &t[7]),
+    ];
+    [
+        lo4(&u[0], &u[4]),
+        lo4(&u[1], &u[5]),
+        lo4(&u[2], &u[6]),
+        lo4(&u[3], &u[7]),
+        hi4(&u[0], &u[4]),
+        hi4(&u[1], &u[5]),
+        hi4(&u[2], &u[6]),
+        hi4(&u[3], &u[7]),
+    ]
 }
 
 /// Registry constructor of C-A4.
@@ -436,6 +521,16 @@ impl Plane {
         }
     }
 
+    /// A `w x h` plane whose every sample the caller writes (rows `0..h` up to `w`, then
+    /// [`Plane::pad`]): not zeroed first.
+    fn overwritten(w: usize, h: usize) -> Self {
+        let (pw, ph) = (w.div_ceil(8) * 8, h.div_ceil(8) * 8);
+        Plane {
+            w: pw,
+            data: frame_buffer_overwritten(pw * ph.max(8)),
+        }
+    }
+
     /// Returns the plane's buffer for the next frame.
     fn recycle(self) {
         recycle(self.data);
@@ -463,39 +558,50 @@ impl JpegCompression {
         use rayon::prelude::*;
         let pw = p.w;
         let m = &self.m;
-        p.data
-            .par_chunks_mut(pw * 8)
-            .for_each(|band| roundtrip_band(m, q_t, qinv_t, pw, band));
+        p.data.par_chunks_mut(pw * 8).for_each_init(
+            || (vec![0f32; 8 * pw], vec![0f32; 8 * pw]),
+            |(s1, s2), band| roundtrip_band(m, q_t, qinv_t, pw, band, s1, s2),
+        );
     }
 }
 
 wide_fn! {
     /// DCT, quantise, dequantise, inverse DCT of every 8x8 block of a band of 8 rows of `pw`
     /// samples (level-shifted by 128), in place; `q_t` and `qinv_t` are the quantisation table
-    /// and its reciprocals, transposed.
-    fn roundtrip_band(m: &Block, q_t: &Block, qinv_t: &Block, pw: usize, band: &mut [f32]) {
-        for bx in 0..pw / 8 {
-            let mut blk = [[0f32; 8]; 8];
-            for (y, row) in blk.iter_mut().enumerate() {
-                for (x, v) in row.iter_mut().enumerate() {
-                    *v = band[y * pw + bx * 8 + x] - 128.0;
-                }
-            }
-            // Forward: the coefficients C = M B M^T come out transposed, C^T = M (M B)^T,
-            // which saves two transposes; they are quantised and dequantised as C^T.
-            let mut ct = dct8(m, &transpose8(&dct8(m, &blk)));
-            for (row, (qi, qr)) in ct.iter_mut().zip(qinv_t.iter().zip(q_t)) {
-                for ((coef, qi), q) in row.iter_mut().zip(qi).zip(qr) {
+    /// and its reciprocals, transposed; `s1`, `s2` hold 8 rows each. Each transform runs over
+    /// the whole band (vertical passes as long loops, the horizontal ones as vertical passes
+    /// between block transposes): per coefficient the same operations in the same order as a
+    /// block-by-block transform.
+    fn roundtrip_band(
+        m: &Block,
+        q_t: &Block,
+        qinv_t: &Block,
+        pw: usize,
+        band: &mut [f32],
+        s1: &mut [f32],
+        s2: &mut [f32],
+    ) {
+        for v in band.iter_mut() {
+            *v -= 128.0;
+        }
+        // Forward: the coefficients C = M B M^T come out transposed, C^T = M (M B)^T; they are
+        // quantised and dequantised as C^T.
+        dct_columns(m, band, pw, s1, s2);
+        transpose_blocks(s2, pw);
+        dct_columns(m, s2, pw, s1, band);
+        for (row, (qi, q)) in band.chunks_exact_mut(pw).zip(qinv_t.iter().zip(q_t)) {
+            for blk in row.chunks_exact_mut(8) {
+                for ((coef, qi), q) in blk.iter_mut().zip(qi).zip(q) {
                     *coef = round_f32(*coef * qi) * q;
                 }
             }
-            // Inverse: B = M^T C M = M^T (M^T C^T)^T.
-            let b = idct8(m, &transpose8(&idct8(m, &ct)));
-            for (y, row) in b.iter().enumerate() {
-                for (x, v) in row.iter().enumerate() {
-                    band[y * pw + bx * 8 + x] = (v + 128.0).clamp(0.0, 255.0);
-                }
-            }
+        }
+        // Inverse: B = M^T C M = M^T (M^T C^T)^T.
+        idct_columns(m, band, pw, s2);
+        transpose_blocks(s2, pw);
+        idct_columns(m, s2, pw, band);
+        for v in band.iter_mut() {
+            *v = (*v + 128.0).clamp(0.0, 255.0);
         }
     }
 }
@@ -521,13 +627,16 @@ wide_fn! {
         for (yv, ((&r, &g), &b)) in y.iter_mut().zip(rgb()) {
             *yv = 0.299 * r + 0.587 * g + 0.114 * b;
         }
+        // Whole pairs in one branch-free loop, an odd last sample on its own.
         let pair_sums = |t: &[f32], out: &mut [f32]| {
-            for (o, pair) in out.iter_mut().zip(t.chunks(2)) {
-                *o = match pair {
-                    [a, b] => (*o + a) + b,
-                    [a] => *o + a,
-                    _ => *o,
-                };
+            let pairs = t.chunks_exact(2);
+            let last = pairs.remainder().first().copied();
+            let n = pairs.len();
+            for (o, pair) in out.iter_mut().zip(pairs) {
+                *o = (*o + pair[0]) + pair[1];
+            }
+            if let (Some(a), Some(o)) = (last, out.get_mut(n)) {
+                *o += a;
             }
         };
         for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
@@ -549,8 +658,8 @@ wide_fn! {
     fn upsample_row(t: &[f32], out: &mut [f32]) {
         let n = t.len();
         let f = |c: f32, side: f32| (3.0 * c + side) * (1.0 / 16.0) - 128.0;
-        // The edge samples (which replicate their neighbour) first, then the interior without
-        // index clamps (it vectorises).
+        // The edge samples (which replicate their neighbour) on their own, the interior pairs
+        // 1..n-1 (always whole: the row is 2n - 1 or 2n long) without index clamps.
         let edge = |i: usize, pair: &mut [f32]| {
             let c = t[i];
             pair[0] = f(c, t[i.saturating_sub(1)]);
@@ -558,19 +667,41 @@ wide_fn! {
                 *odd = f(c, t[(i + 1).min(n - 1)]);
             }
         };
-        let mut pairs = out.chunks_mut(2);
-        for (i, pair) in pairs.by_ref().take(1).enumerate() {
-            edge(i, pair);
-        }
-        if n > 2 {
-            for (pair, win) in pairs.by_ref().take(n - 2).zip(t.windows(3)) {
-                pair[0] = f(win[1], win[0]);
-                pair[1] = f(win[1], win[2]);
+        let first = out.len().min(2);
+        edge(0, &mut out[..first]);
+        let done = if n > 2 {
+            let (left, centre, right) = (&t[..n - 2], &t[1..n - 1], &t[2..]);
+            let interior = &mut out[2..2 * (n - 1)];
+            for (((pair, &c), &l), &r) in interior.chunks_exact_mut(2).zip(centre).zip(left).zip(right) {
+                pair[0] = f(c, l);
+                pair[1] = f(c, r);
             }
+            n - 1
+        } else {
+            1
+        };
+        if 2 * done < out.len() {
+            edge(done, &mut out[2 * done..]);
         }
-        let done = if n > 2 { n - 1 } else { 1 };
-        for (i, pair) in pairs.enumerate() {
-            edge(done + i, pair);
+    }
+}
+
+wide_fn! {
+    /// Chroma sums to averages (`inv` the reciprocal of the samples summed), with the 128
+    /// offset.
+    fn average_chroma(cb: &mut [f32], cr: &mut [f32], inv: f32) {
+        for (b, r) in cb.iter_mut().zip(cr.iter_mut()) {
+            *b = *b * inv + 128.0;
+            *r = *r * inv + 128.0;
+        }
+    }
+}
+
+wide_fn! {
+    /// `t = 3 a + b`: the vertical weights of the fancy upsampling.
+    fn weigh_rows(a: &[f32], b: &[f32], t: &mut [f32]) {
+        for ((d, a), b) in t.iter_mut().zip(a).zip(b) {
+            *d = 3.0 * a + b;
         }
     }
 }
@@ -594,7 +725,7 @@ impl CameraPerturbation for JpegCompression {
         let (w, h) = (input.width as usize, input.height as usize);
         let f = input.format;
         if f.is_mono() {
-            let mut y = Plane::new(w, h);
+            let mut y = Plane::overwritten(w, h);
             let pw = y.w;
             y.data
                 .par_chunks_mut(pw)
@@ -616,7 +747,7 @@ impl CameraPerturbation for JpegCompression {
             return;
         }
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-        let mut yp = Plane::new(w, h);
+        let mut yp = Plane::overwritten(w, h);
         let mut cb = Plane::new(cw, ch);
         let mut cr = Plane::new(cw, ch);
         let (ypw, cpw) = (yp.w, cb.w);
@@ -636,11 +767,14 @@ impl CameraPerturbation for JpegCompression {
                         to_ycc(input.row(r0 + k), f, work, yrow, cbrow, crrow);
                     }
                     // Averages of 1, 2 or 4 samples: a power of two, so multiplying by the
-                    // reciprocal is exact.
-                    for (cx, (b, r)) in cbrow[..cw].iter_mut().zip(&mut crrow[..cw]).enumerate() {
-                        let inv = 1.0 / (nrows * ((2 * cx + 2).min(w) - 2 * cx)) as f32;
-                        *b = *b * inv + 128.0;
-                        *r = *r * inv + 128.0;
+                    // reciprocal is exact. Only an odd width's last column has one sample
+                    // per row.
+                    let per_row = |cx: usize| (2 * cx + 2).min(w) - 2 * cx;
+                    let inv = |cx: usize| 1.0 / (nrows * per_row(cx)) as f32;
+                    let full = w / 2;
+                    average_chroma(&mut cbrow[..full], &mut crrow[..full], inv(0));
+                    if full < cw {
+                        average_chroma(&mut cbrow[full..cw], &mut crrow[full..cw], inv(full));
                     }
                 },
             );
@@ -656,10 +790,7 @@ impl CameraPerturbation for JpegCompression {
         // interleaved last.
 
         let vertical = |p: &Plane, cy: usize, ny: usize, t: &mut [f32]| {
-            let (a, b) = (&p.data[cy * cpw..][..cw], &p.data[ny * cpw..][..cw]);
-            for ((d, a), b) in t.iter_mut().zip(a).zip(b) {
-                *d = 3.0 * a + b;
-            }
+            weigh_rows(&p.data[cy * cpw..][..cw], &p.data[ny * cpw..][..cw], t);
         };
         let rows = output.rows_mut();
         rows.into_par_iter()
@@ -790,6 +921,17 @@ mod tests {
         let last_col = (0..67).any(|y| out.view().row(y)[100 * 3..].iter().any(|&v| v != 128));
         let blue = out.data.chunks_exact(3).any(|p| p[2] != 128);
         assert!(last_row && last_col && blue);
+    }
+
+    #[test]
+    fn the_shuffle_transpose_is_a_transpose() {
+        let a: Block = std::array::from_fn(|i| std::array::from_fn(|j| (i * 8 + j) as f32));
+        let t = transpose8(&a);
+        for i in 0..8 {
+            for j in 0..8 {
+                assert_eq!(t[j][i], a[i][j]);
+            }
+        }
     }
 
     #[test]

@@ -20,6 +20,20 @@ where
         .for_each(|(y, out)| f(y, input.row(y), out));
 }
 
+/// [`par_rows`] with per-worker state: `init()` makes a worker's state (row buffers), which
+/// `f(state, y, input_row, output_row)` reuses from row to row.
+pub fn par_rows_with<T, I, F>(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, init: I, f: F)
+where
+    I: Fn() -> T + Send + Sync,
+    F: Fn(&mut T, usize, &[u8], &mut [u8]) + Send + Sync,
+{
+    let rows = output.rows_mut();
+    rows.into_par_iter()
+        .with_min_len(ROWS_PER_TASK)
+        .enumerate()
+        .for_each_init(init, |state, (y, out)| f(state, y, input.row(y), out));
+}
+
 /// Whether the functions defined with `wide_fn!` run their AVX2 copy: on x86-64 CPUs that have
 /// AVX2, FMA, BMI1, BMI2 and LZCNT (the x86-64-v3 level, every x86-64 CPU since about 2015),
 /// unless [`force_baseline`] is on. The check is a few cached loads.
@@ -155,6 +169,7 @@ pub fn pad_row_copy<T: Copy>(src: &[T], c: usize, r: usize, dst: &mut [T]) {
 /// Splits a row of colour pixels of `format` into three planes of floats, red, green and blue
 /// (mono8: the grey value in all three). Each format gets its own loop with the channel positions
 /// known at compile time, which lets the compiler vectorise it.
+#[inline(always)]
 pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         src: &[u8],
@@ -174,9 +189,31 @@ pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
     }
 }
 
+/// [`split_rgb`] into planes of bytes.
+#[inline(always)]
+pub fn split_rgb_bytes(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [u8]; 3]) {
+    fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
+        src: &[u8],
+        [r, g, b]: [&mut [u8]; 3],
+    ) {
+        let planes = r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut());
+        for (((r, g), b), p) in planes.zip(src.chunks_exact(C)) {
+            (*r, *g, *b) = (p[R], p[G], p[B]);
+        }
+    }
+    match format {
+        PixelFormat::Rgb8 => each::<3, 0, 1, 2>(src, [r, g, b]),
+        PixelFormat::Bgr8 => each::<3, 2, 1, 0>(src, [r, g, b]),
+        PixelFormat::Rgba8 => each::<4, 0, 1, 2>(src, [r, g, b]),
+        PixelFormat::Bgra8 => each::<4, 2, 1, 0>(src, [r, g, b]),
+        PixelFormat::Mono8 => each::<1, 0, 0, 0>(src, [r, g, b]),
+    }
+}
+
 /// Writes three planes of bytes, red, green and blue, into the colour channels of a row of
 /// `format` pixels; alpha is left as it is. Mono8 takes the red plane. The counterpart of
 /// [`split_rgb`].
+#[inline(always)]
 pub fn merge_rgb(format: PixelFormat, [r, g, b]: [&[u8]; 3], dst: &mut [u8]) {
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         [r, g, b]: [&[u8]; 3],
@@ -681,6 +718,24 @@ pub fn frame_buffer(len: usize) -> Vec<f32> {
     match reused {
         Some(mut b) => {
             b.clear();
+            b.resize(len, 0.0);
+            b
+        }
+        None => vec![0f32; len],
+    }
+}
+
+/// A buffer of `len` samples for a caller that overwrites every one of them: a finished frame's
+/// buffer is reused as it is (its old samples left in place), saving the zeroing of
+/// [`frame_buffer`].
+pub fn frame_buffer_overwritten(len: usize) -> Vec<f32> {
+    let reused = SPARE.lock().ok().and_then(|mut spare| {
+        let i = spare.iter().position(|b| b.capacity() >= len)?;
+        Some(spare.swap_remove(i))
+    });
+    match reused {
+        Some(mut b) => {
+            b.truncate(len);
             b.resize(len, 0.0);
             b
         }

@@ -1,23 +1,36 @@
 //! Weather and illumination family (C-C): frost, snow, fog, brightness, contrast and the animated
 //! overlays (rain, raindrops, lightning, smoke, sun glare, snowflakes).
 
-use super::ops::{SaturationMap, apply_lut, copy_alpha, map_value, par_rows};
+use super::ops::{SaturationMap, apply_lut, copy_alpha, par_rows};
+use super::pointwise::{ByteMap, scale_value};
 use super::texture::{fbm, size_scale, value_noise};
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
 use crate::rng::Rng;
 use rayon::prelude::*;
 
-/// A change of HSV value through a 256-entry table, hue and saturation kept (see
-/// [`super::ops::map_value`]).
-pub struct ValueMap {
-    lut: [u8; 256],
+/// The HSV value scaled by a factor and truncated, `V' = min(255, floor(V f))`, hue and
+/// saturation kept: what [`super::ops::map_value`] computes with that table, in float planes (see
+/// [`scale_value`]; the same bytes).
+pub struct ValueScale {
+    factor: f32,
+    /// The table, for mono8 (whose one channel is the value).
+    mono: ByteMap,
 }
 
-impl CameraPerturbation for ValueMap {
+impl ValueScale {
+    /// Value scaled by `f`.
+    pub fn new(f: f32) -> Self {
+        ValueScale {
+            factor: f,
+            mono: ByteMap::line(value_lut(f), f as f64, -0.5),
+        }
+    }
+}
+
+impl CameraPerturbation for ValueScale {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
-        let lut = &self.lut;
-        map_value(input, output, |_, _, v| lut[v as usize]);
+        scale_value(input, output, self.factor, &self.mono);
     }
 }
 
@@ -34,41 +47,36 @@ fn value_lut(f: f32) -> [u8; 256] {
 
 /// C-C4 brightness_increase: over-exposure, HSV `V <- min(255, V f)` truncated as the reference's
 /// uint8 write, hue and saturation kept (computed in RGB, see [`super::ops::map_value`]).
-pub const BRIGHTNESS_UP: CameraBuilder = |s| {
-    Ok(Box::new(ValueMap {
-        lut: value_lut(BRIGHTNESS_INCREASE[s.level()]),
-    }))
-};
+pub const BRIGHTNESS_UP: CameraBuilder =
+    |s| Ok(Box::new(ValueScale::new(BRIGHTNESS_INCREASE[s.level()])));
 
 /// C-C5 brightness_decrease: under-exposure, HSV `V <- V f`, the mirror of C-C4.
-pub const BRIGHTNESS_DOWN: CameraBuilder = |s| {
-    Ok(Box::new(ValueMap {
-        lut: value_lut(BRIGHTNESS_DECREASE[s.level()]),
-    }))
-};
+pub const BRIGHTNESS_DOWN: CameraBuilder =
+    |s| Ok(Box::new(ValueScale::new(BRIGHTNESS_DECREASE[s.level()])));
 
 /// C-C6 contrast: contrast factor, severities 1..5 (PerturbationDrive `contrast`, increase only).
 pub const CONTRAST_FACTOR: [f32; 5] = [1.1, 1.2, 1.3, 1.5, 1.7];
 
 /// C-C6 contrast: `out = clip(127.5 + (I - 127.5) f)` on every channel, rounded (the reference
-/// returns floats). A per-value table.
+/// returns floats). A per-value table, computed as a clamped line in 16-bit integer arithmetic
+/// (same bytes, see [`ByteMap::line`]).
 pub struct Contrast {
-    lut: [u8; 256],
+    map: ByteMap,
 }
 
 /// Registry constructor of C-C6.
 pub const CONTRAST: CameraBuilder = |s| {
     let f = CONTRAST_FACTOR[s.level()];
+    let lut =
+        std::array::from_fn(|v| (127.5 + (v as f32 - 127.5) * f).round().clamp(0.0, 255.0) as u8);
     Ok(Box::new(Contrast {
-        lut: std::array::from_fn(|v| {
-            (127.5 + (v as f32 - 127.5) * f).round().clamp(0.0, 255.0) as u8
-        }),
+        map: ByteMap::line(lut, f as f64, 127.5 * (1.0 - f as f64)),
     }))
 };
 
 impl CameraPerturbation for Contrast {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
-        apply_lut(input, output, &self.lut);
+        self.map.apply(input, output);
     }
 }
 

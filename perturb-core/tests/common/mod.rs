@@ -6,7 +6,8 @@ use perturb_core::formats::{kitti, picture};
 use perturb_core::image::{Image, resize_bilinear};
 use std::path::PathBuf;
 
-/// `../shared/data` (or `$PERTURB_SHARED_DATA`), or `None` with a message saying the test skips.
+/// `../shared/data` (or `$PERTURB_SHARED_DATA`), or `None` with a message saying the test skips
+/// (a failure under `CI=true`, where the data must be there).
 pub fn shared_data(test: &str) -> Option<PathBuf> {
     let dir = std::env::var_os("PERTURB_SHARED_DATA")
         .map(PathBuf::from)
@@ -14,6 +15,11 @@ pub fn shared_data(test: &str) -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
+        assert!(
+            std::env::var("CI").ok().as_deref() != Some("true"),
+            "{test}: real data not found at {} and CI=true (set PERTURB_SHARED_DATA)",
+            dir.display()
+        );
         eprintln!(
             "skipping {test}: real data not found at {} (set PERTURB_SHARED_DATA)",
             dir.display()
