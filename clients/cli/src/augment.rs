@@ -47,6 +47,9 @@ pub struct Args {
     /// LiDAR sensor model.
     #[arg(long)]
     sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    forward: Option<String>,
     /// LiDAR full-scale intensity, 1 or 255.
     #[arg(long)]
     intensity_max: Option<f32>,
@@ -72,6 +75,7 @@ pub fn run(a: Args) -> Result<()> {
         seed: a.seed,
         threads: None,
         sensor: a.sensor.clone(),
+        forward: a.forward.clone(),
         intensity_max: a.intensity_max,
         topic: vec![],
         quiet: true,
@@ -83,6 +87,7 @@ pub fn run(a: Args) -> Result<()> {
         Some(sensor_for(
             kind,
             a.sensor.as_deref(),
+            a.forward.as_deref(),
             a.intensity_max,
             false,
         )?)

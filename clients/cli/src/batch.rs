@@ -54,6 +54,9 @@ pub struct Args {
     /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
     #[arg(long)]
     pub sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    pub forward: Option<String>,
     /// Full-scale intensity of the clouds, 1 or 255.
     #[arg(long)]
     pub intensity_max: Option<f32>,
@@ -183,6 +186,7 @@ struct Manifest<'a> {
     input: String,
     seed: u64,
     sensor: Option<&'a str>,
+    forward: Option<&'a str>,
     intensity_max: Option<f32>,
     sets: Vec<String>,
 }
@@ -202,6 +206,7 @@ pub fn run(args: Args) -> Result<()> {
         input: args.input.display().to_string(),
         seed: args.seed,
         sensor: args.sensor.as_deref(),
+        forward: args.forward.as_deref(),
         intensity_max: args.intensity_max,
         sets: sets
             .iter()
@@ -239,6 +244,7 @@ pub fn run(args: Args) -> Result<()> {
                 Some(sensor_for(
                     kind,
                     args.sensor.as_deref(),
+                    args.forward.as_deref(),
                     args.intensity_max,
                     args.quiet,
                 )?)
@@ -255,7 +261,13 @@ pub fn run(args: Args) -> Result<()> {
             let bag = Bag::open(path)?;
             let total: u64 = bag.topics()?.iter().filter_map(|t| t.message_count).sum();
             let pb = progress(total * todo.len() as u64, args.quiet);
-            let sensor = sensor_for(None, args.sensor.as_deref(), args.intensity_max, args.quiet)?;
+            let sensor = sensor_for(
+                None,
+                args.sensor.as_deref(),
+                args.forward.as_deref(),
+                args.intensity_max,
+                args.quiet,
+            )?;
             pool.install(|| {
                 todo.par_iter().try_for_each(|set| {
                     let dir = set.dir(&args.out);
@@ -310,8 +322,9 @@ fn lidar_metrics(args: &Args, sets: &[Set], pool: &rayon::ThreadPool) -> Result<
     }
     let cfg = EvalConfig::new(
         false,
+        None,
         2.0,
-        args.sensor.as_deref(),
+        (args.sensor.as_deref(), args.forward.as_deref()),
         args.topic.clone(),
         args.quiet,
     )?;

@@ -4,7 +4,7 @@ use anyhow::{Context, Result, bail};
 use perturb_core::cloud::{Cloud, CloudView};
 use perturb_core::formats::{FileKind, kitti, pcd, picture};
 use perturb_core::image::{Image, ImageView};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensors::{Axes, Axis, SensorModel};
 use std::path::Path;
 
 /// A decoded input file.
@@ -15,7 +15,8 @@ pub enum Loaded {
     Cloud(Cloud, FileKind, Option<(pcd::PcdData, [f64; 7])>),
 }
 
-/// Reads and decodes an image or point-cloud file.
+/// Reads and decodes an image or point-cloud file. Doubts about a KITTI `.bin` and bytes a PCD
+/// file's reader ignored are printed as warnings on stderr.
 pub fn load(path: &Path) -> Result<Loaded> {
     let kind = FileKind::from_path(path)?;
     if kind == FileKind::Mcap {
@@ -31,7 +32,11 @@ pub fn load(path: &Path) -> Result<Loaded> {
             Loaded::Image(picture::decode(&bytes).with_context(ctx)?, kind)
         }
         FileKind::KittiBin => {
-            Loaded::Cloud(kitti::decode_kitti(&bytes).with_context(ctx)?, kind, None)
+            let cloud = kitti::decode_kitti(&bytes).with_context(ctx)?;
+            for doubt in kitti::kitti_doubts(&bytes) {
+                eprintln!("warning: {}: {doubt}", path.display());
+            }
+            Loaded::Cloud(cloud, kind, None)
         }
         FileKind::NuscenesBin => Loaded::Cloud(
             kitti::decode_nuscenes(&bytes).with_context(ctx)?,
@@ -40,6 +45,9 @@ pub fn load(path: &Path) -> Result<Loaded> {
         ),
         FileKind::Pcd => {
             let f = pcd::decode(&bytes).with_context(ctx)?;
+            for w in &f.warnings {
+                eprintln!("warning: {}: {w}", path.display());
+            }
             Loaded::Cloud(f.cloud, kind, Some((f.data, f.viewpoint)))
         }
         FileKind::Mcap => unreachable!("handled above"),
@@ -75,19 +83,32 @@ pub fn save_cloud(
 }
 
 /// The sensor model for a cloud file: `--sensor` if given, else HDL-64E for KITTI `.bin` files
-/// (KITTI's sensor, reflectance 0..1) and VLP-32C (intensity 0..255) for everything else;
-/// `--intensity-max` overrides the intensity scale. The choice is printed, never silent.
+/// (KITTI's sensor, reflectance 0..1), HDL-32E for nuScenes `.pcd.bin` files and VLP-32C
+/// (intensity 0..255) for everything else; the forward axis from `--forward` if given, else +y
+/// for nuScenes `.pcd.bin` files (nuScenes' `LIDAR_TOP` looks along +y) and +x otherwise (ROS,
+/// KITTI, Velodyne drivers); `--intensity-max` overrides the intensity scale. The choice is
+/// printed unless `quiet`, never silent.
 pub fn sensor_for(
     kind: Option<FileKind>,
     sensor: Option<&str>,
+    forward: Option<&str>,
     intensity_max: Option<f32>,
     quiet: bool,
 ) -> Result<SensorModel> {
     let mut m = match sensor {
         Some(name) => SensorModel::by_name(name)?,
         None if kind == Some(FileKind::KittiBin) => SensorModel::hdl64e(),
+        None if kind == Some(FileKind::NuscenesBin) => SensorModel::hdl32e(),
         None => SensorModel::vlp32c(),
     };
+    let axes = match forward {
+        Some(f) => Axis::parse(f)
+            .and_then(|f| Axes::new(f, m.axes.up))
+            .map_err(|e| anyhow::anyhow!("--forward: {e}"))?,
+        None if kind == Some(FileKind::NuscenesBin) => SensorModel::nuscenes().axes,
+        None => m.axes,
+    };
+    m = m.with_axes(axes);
     if let Some(max) = intensity_max {
         if max != 1.0 && max != 255.0 {
             bail!("--intensity-max must be 1 or 255, not {max}");
@@ -96,8 +117,8 @@ pub fn sensor_for(
     }
     if !quiet {
         eprintln!(
-            "sensor model {} (intensity full scale {}); change with --sensor / --intensity-max",
-            m.name, m.intensity_max
+            "sensor model {}; change with --sensor / --forward / --intensity-max",
+            m.describe()
         );
     }
     Ok(m)

@@ -41,6 +41,9 @@ pub struct Args {
     /// LiDAR sensor model.
     #[arg(long)]
     sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    forward: Option<String>,
     /// LiDAR full-scale intensity, 1 or 255.
     #[arg(long)]
     intensity_max: Option<f32>,
@@ -102,7 +105,13 @@ pub fn run(a: Args) -> Result<()> {
             if entries.is_empty() {
                 bail!("no LiDAR perturbation selected");
             }
-            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max, false)?;
+            let sensor = sensor_for(
+                Some(kind),
+                a.sensor.as_deref(),
+                a.forward.as_deref(),
+                a.intensity_max,
+                false,
+            )?;
             let color = if a.color_by == "intensity" {
                 ColorBy::Intensity
             } else {
