@@ -174,6 +174,8 @@ pub fn min_area_rect(hull: &[[f32; 2]]) -> ([f32; 2], [f32; 2], f32) {
 /// Points used for the L-shape search at most (a regular subsample of larger clusters; the final
 /// extents use every point).
 const L_SHAPE_SAMPLES: usize = 384;
+/// Coarse step of the L-shape search, in fine steps.
+const L_SHAPE_COARSE: usize = 4;
 
 /// The rectangle of `xy` oriented by L-shape fitting (Zhang et al., "Efficient L-Shape Fitting
 /// for Vehicle Detection Using Laser Scanners", IV 2017, closeness criterion): for every
@@ -189,6 +191,41 @@ pub fn l_shape_rect(xy: &[[f32; 2]], step_deg: f32) -> ([f32; 2], [f32; 2], f32)
         return normalise(axis_aligned(xy));
     }
     rect_at(xy, l_shape_heading(xy, step_deg))
+}
+
+/// The closeness criterion of [`l_shape_heading`] at orientation `theta` (`c1`, `c2`: scratch of
+/// the sample's length).
+fn closeness(sample: &[[f32; 2]], theta: f32, c1: &mut [f32], c2: &mut [f32]) -> f32 {
+    let (s, c) = theta.sin_cos();
+    let mut e = [
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    for (j, p) in sample.iter().enumerate() {
+        c1[j] = p[0] * c + p[1] * s;
+        c2[j] = -p[0] * s + p[1] * c;
+        e[0] = e[0].min(c1[j]);
+        e[1] = e[1].max(c1[j]);
+        e[2] = e[2].min(c2[j]);
+        e[3] = e[3].max(c2[j]);
+    }
+    // The face of each axis the points lie closer to (smaller sum of squared distances).
+    let near_edge = |v: &[f32], lo: f32, hi: f32| {
+        let (mut dl, mut dh) = (0f32, 0f32);
+        for &x in v {
+            dl += (x - lo) * (x - lo);
+            dh += (hi - x) * (hi - x);
+        }
+        if dl <= dh { lo } else { hi }
+    };
+    let f1 = near_edge(c1, e[0], e[1]);
+    let f2 = near_edge(c2, e[2], e[3]);
+    c1.iter()
+        .zip(c2.iter())
+        .map(|(a, b)| 1.0 / (a - f1).abs().min((b - f2).abs()).max(0.01))
+        .sum()
 }
 
 /// The heading of [`l_shape_rect`]: the orientation in [0, pi/2) that maximises the closeness
@@ -207,47 +244,29 @@ pub fn l_shape_heading(xy: &[[f32; 2]], step_deg: f32) -> f32 {
         .collect();
     let step = step_deg.clamp(0.1, 45.0).to_radians();
     let steps = (std::f32::consts::FRAC_PI_2 / step).round().max(1.0) as usize;
-    let (mut best, mut best_theta) = (f32::NEG_INFINITY, 0.0f32);
     let mut c1 = vec![0f32; sample.len()];
     let mut c2 = vec![0f32; sample.len()];
-    for k in 0..steps {
-        let theta = k as f32 * step;
-        let (s, c) = theta.sin_cos();
-        let mut e = [
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-        ];
-        for (j, p) in sample.iter().enumerate() {
-            c1[j] = p[0] * c + p[1] * s;
-            c2[j] = -p[0] * s + p[1] * c;
-            e[0] = e[0].min(c1[j]);
-            e[1] = e[1].max(c1[j]);
-            e[2] = e[2].min(c2[j]);
-            e[3] = e[3].max(c2[j]);
-        }
-        // The face of each axis the points lie closer to (smaller sum of squared distances).
-        let near_edge = |v: &[f32], lo: f32, hi: f32| {
-            let (mut dl, mut dh) = (0f32, 0f32);
-            for &x in v {
-                dl += (x - lo) * (x - lo);
-                dh += (hi - x) * (hi - x);
-            }
-            if dl <= dh { lo } else { hi }
-        };
-        let f1 = near_edge(&c1, e[0], e[1]);
-        let f2 = near_edge(&c2, e[2], e[3]);
-        let score: f32 = c1
-            .iter()
-            .zip(&c2)
-            .map(|(a, b)| 1.0 / (a - f1).abs().min((b - f2).abs()).max(0.01))
-            .sum();
-        if score > best {
-            best = score;
-            best_theta = theta;
+    let mut score_at = |k: usize| closeness(&sample, k as f32 * step, &mut c1, &mut c2);
+    // Coarse to fine: every COARSE-th step of the quarter turn, then the steps around the best
+    // coarse one (the criterion varies slowly between neighbouring orientations).
+    let coarse = L_SHAPE_COARSE.min(steps);
+    let (mut best, mut best_k) = (f32::NEG_INFINITY, 0usize);
+    for k in (0..steps).step_by(coarse) {
+        let v = score_at(k);
+        if v > best {
+            (best, best_k) = (v, k);
         }
     }
+    let centre = best_k;
+    for d in 1..coarse {
+        for k in [(centre + d) % steps, (centre + steps - d) % steps] {
+            let v = score_at(k);
+            if v > best || (v == best && k < best_k) {
+                (best, best_k) = (v, k);
+            }
+        }
+    }
+    let best_theta = best_k as f32 * step;
     best_theta
 }
 

@@ -31,6 +31,9 @@ pub(crate) struct Clusterer {
     col_of: Vec<u32>,
     /// Centroids in column order (z zeroed for 2-D clustering).
     sorted: Vec<[f32; 3]>,
+    /// Per column, positions in `sorted` ordered by z, and their z.
+    zorder: Vec<u32>,
+    zval: Vec<f32>,
     core: Vec<bool>,
     label: Vec<i32>,
     queue: Vec<u32>,
@@ -67,8 +70,6 @@ impl Clusterer {
         self.drows = ((span_y / dcell).ceil() as usize).max(1);
         self.dcell = dcell;
         self.dorigin = lo;
-        self.col_start.clear();
-        self.col_start.resize(self.dcols * self.drows + 1, 0);
     }
 
     /// Clusters the points `idx` of `points` (voxels of `voxel_size`, then DBSCAN with `eps`,
@@ -159,16 +160,34 @@ impl Clusterer {
             self.size_grid([c.min_x, c.min_y], [c.max_x, c.max_y], eps);
         }
         let m = self.centroids.len();
-        let (cols, rows, inv) = (self.dcols, self.drows, 1.0 / self.dcell);
+        let (gcols, grows, inv) = (self.dcols, self.drows, 1.0 / self.dcell);
         let o = self.dorigin;
+        // Cells of the region's grid, then the sub-grid of the cells the centroids occupy (same
+        // cells, same column order): a split of one cluster costs in proportion to that cluster,
+        // not to the whole region of interest.
+        let cell = |p: &[f32; 3]| {
+            (
+                (((p[0] - o[0]) * inv).max(0.0) as usize).min(gcols - 1),
+                (((p[1] - o[1]) * inv).max(0.0) as usize).min(grows - 1),
+            )
+        };
+        let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
+        for p in &self.centroids {
+            let (cx, cy) = cell(p);
+            (x0, x1, y0, y1) = (x0.min(cx), x1.max(cx), y0.min(cy), y1.max(cy));
+        }
+        if m == 0 {
+            (x0, x1, y0, y1) = (0, 0, 0, 0);
+        }
+        let (cols, rows) = (x1 - x0 + 1, y1 - y0 + 1);
         // Counting sort of the centroids into grid columns.
         self.col_of.clear();
         self.col_of.extend(self.centroids.iter().map(|p| {
-            let cx = (((p[0] - o[0]) * inv).max(0.0) as usize).min(cols - 1);
-            let cy = (((p[1] - o[1]) * inv).max(0.0) as usize).min(rows - 1);
-            (cx * rows + cy) as u32
+            let (cx, cy) = cell(p);
+            ((cx - x0) * rows + (cy - y0)) as u32
         }));
-        self.col_start.fill(0);
+        self.col_start.clear();
+        self.col_start.resize(cols * rows + 1, 0);
         for &col in &self.col_of {
             self.col_start[col as usize + 1] += 1;
         }
@@ -196,38 +215,71 @@ impl Clusterer {
             let p = self.centroids[v as usize];
             [p[0], p[1], p[2] * zw]
         }));
+        // Per column, the positions of its centroids ordered by height, so that a neighbour
+        // query reads only the slice of each column within eps in z (the columns span the whole
+        // height of the scene). Only the search uses this order: the seeds are visited in column
+        // order, so the clusters and their labels do not depend on it.
+        self.zorder.clear();
+        self.zorder.extend(0..m as u32);
+        for col in 0..cols * rows {
+            let (a, b) = (self.col_start[col] as usize, self.col_start[col + 1] as usize);
+            if b - a > 1 {
+                let sorted = &self.sorted;
+                self.zorder[a..b].sort_unstable_by(|&i, &j| {
+                    sorted[i as usize][2]
+                        .total_cmp(&sorted[j as usize][2])
+                        .then(i.cmp(&j))
+                });
+            }
+        }
+        self.zval.clear();
+        self.zval
+            .extend(self.zorder.iter().map(|&i| self.sorted[i as usize][2]));
         let sorted = &self.sorted;
         let col_start = &self.col_start;
-        // The three contiguous runs of columns (cx-1..=cx+1, cy-1..=cy+1) around column `col`.
-        let runs = |col: usize| {
+        let (zorder, zval) = (&self.zorder, &self.zval);
+        let zwin = eps * 1.001 + 1e-4;
+        // Calls `f(t)` for every centroid position `t` within eps of the centroid at position
+        // `s` (itself included), column by column of the 3 x 3 around its column `col`; stops
+        // early when `f` returns false.
+        let neighbours = |s: usize, col: usize, f: &mut dyn FnMut(usize) -> bool| {
+            let p = &sorted[s];
             let (cx, cy) = (col / rows, col % rows);
-            let mut r = [(0usize, 0usize); 3];
-            for (k, nx) in (cx.saturating_sub(1)..=(cx + 1).min(cols - 1)).enumerate() {
-                let y0 = nx * rows + cy.saturating_sub(1);
-                let y1 = nx * rows + (cy + 1).min(rows - 1);
-                r[k] = (col_start[y0] as usize, col_start[y1 + 1] as usize);
+            for nx in cx.saturating_sub(1)..=(cx + 1).min(cols - 1) {
+                for ny in cy.saturating_sub(1)..=(cy + 1).min(rows - 1) {
+                    let c = nx * rows + ny;
+                    let (a, b) = (col_start[c] as usize, col_start[c + 1] as usize);
+                    if a == b {
+                        continue;
+                    }
+                    // A window a little wider than eps: the distance test below decides, with
+                    // the same rounding as a scan of the whole column.
+                    let lo = a + zval[a..b].partition_point(|&z| z < p[2] - zwin);
+                    for k in lo..b {
+                        if zval[k] > p[2] + zwin {
+                            break;
+                        }
+                        let t = zorder[k] as usize;
+                        let q = &sorted[t];
+                        let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
+                        if dx * dx + dy * dy + dz * dz <= eps2 && !f(t) {
+                            return;
+                        }
+                    }
+                }
             }
-            r
-        };
-        let near = |p: &[f32; 3], q: &[f32; 3]| {
-            let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
-            dx * dx + dy * dy + dz * dz <= eps2
         };
         // Core points: at least min_samples neighbours within eps, the point itself included.
         self.core.clear();
         self.core.resize(m, false);
         for col in 0..cols * rows {
             let (a, b) = (col_start[col] as usize, col_start[col + 1] as usize);
-            if a == b {
-                continue;
-            }
-            let r = runs(col);
             for s in a..b {
-                let p = &sorted[s];
                 let mut count = 0u32;
-                for &(lo, hi) in &r {
-                    count += sorted[lo..hi].iter().filter(|q| near(p, q)).count() as u32;
-                }
+                neighbours(s, col, &mut |_| {
+                    count += 1;
+                    count < min_samples
+                });
                 self.core[s] = count >= min_samples;
             }
         }
@@ -244,18 +296,17 @@ impl Clusterer {
             self.queue.push(seed as u32);
             while let Some(s) = self.queue.pop() {
                 let s = s as usize;
-                let p = sorted[s];
                 let col = self.col_of[self.col_items[s] as usize] as usize;
-                for (lo, hi) in runs(col) {
-                    for (t, q) in sorted.iter().enumerate().take(hi).skip(lo) {
-                        if self.label[t] < 0 && near(&p, q) {
-                            self.label[t] = next;
-                            if self.core[t] {
-                                self.queue.push(t as u32);
-                            }
+                let (label, core, queue) = (&mut self.label, &self.core, &mut self.queue);
+                neighbours(s, col, &mut |t| {
+                    if label[t] < 0 {
+                        label[t] = next;
+                        if core[t] {
+                            queue.push(t as u32);
                         }
                     }
-                }
+                    true
+                });
             }
             next += 1;
         }

@@ -37,7 +37,7 @@
 //! severity), so their severities are the violent end of each scale: that is where the
 //! lightweight model's retention drops below the physics one's. Detection retention with
 //! `perturb metrics lidar` on the shared KITTI scans falls with severity and lies below the
-//! physics counterpart's at every severity (table in `docs/lidar-weather.md`, checked by the
+//! physics counterpart's at every severity (table in `docs/lidar.md`, checked by the
 //! test `fast_models_degrade_detection_more_than_physics`).
 //!
 //! Changed in issue 16: alpha was fitted so that the point retention on KITTI equalled the physics
