@@ -135,6 +135,8 @@ pub struct AdapterReport {
     pub skipped: u64,
     /// Frames lost (e.g. a DDS write that failed).
     pub failed: u64,
+    /// Frames lost before the adapter: gaps in a ROS 1 publisher's header `seq` (ingress).
+    pub lost: u64,
     /// Damage found (bags).
     pub damage: Vec<String>,
     /// Notes.

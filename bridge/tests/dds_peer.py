@@ -4,7 +4,7 @@ PyPI package `cyclonedds` (its wheel bundles libddsc), with the ROS 2 naming and
 (`rt/` topics, `sensor_msgs::msg::dds_::Image_` types), sensor-data QoS (best effort, keep last 5,
 volatile) unless --reliable.
 
-  dds_peer.py listen  --topic /cam --type image --count N [--timeout S]
+  dds_peer.py listen  --topic /cam --type image --count N [--timeout S] [--interface lo]
       prints one JSON line per received sample: stamp, frame_id, geometry, sha256 of data
   dds_peer.py publish --topic /cam --type image|compressed_image|cloud --count N
                       [--width W --height H] [--points P] [--lie]
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 try:
     from cyclonedds.core import Qos, Policy
-    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.domain import Domain, DomainParticipant
     from cyclonedds.topic import Topic
     from cyclonedds.pub import DataWriter
     from cyclonedds.sub import DataReader
@@ -98,6 +98,28 @@ class PointCloud2(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_"):
 TYPES = {"image": Image, "compressed_image": CompressedImage, "cloud": PointCloud2}
 
 
+def participant(args):
+    """A participant on args.domain; with --interface, Cyclone may use only those interfaces
+    (multicast forced on for loopback, which often lacks the MULTICAST flag), as the bridge's
+    `[dds] interfaces` does."""
+    if args.interface:
+        nics = "".join(
+            f'<NetworkInterface name="{n}" multicast="{"true" if n == "lo" else "default"}"/>'
+            for n in args.interface)
+        # loopback only: unicast discovery on 127.0.0.1 too, as the bridge does
+        discovery = ('<Discovery><ParticipantIndex>auto</ParticipantIndex>'
+                     '<MaxAutoParticipantIndex>40</MaxAutoParticipantIndex>'
+                     '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
+                     if all(n == "lo" for n in args.interface) else '')
+        xml = (f'<CycloneDDS><Domain Id="{args.domain}"><General><Interfaces>{nics}</Interfaces>'
+               f'</General>{discovery}</Domain></CycloneDDS>')
+        _DOMAINS.append(Domain(args.domain, xml))  # must outlive the participant
+    return DomainParticipant(args.domain)
+
+
+_DOMAINS = []
+
+
 def qos(args):
     rel = Policy.Reliability.Reliable(duration=0.1) if args.reliable else Policy.Reliability.BestEffort
     return Qos(rel, Policy.History.KeepLast(args.depth), Policy.Durability.Volatile)
@@ -134,7 +156,7 @@ def describe(s, kind):
 
 
 def listen(args):
-    dp = DomainParticipant(args.domain)
+    dp = participant(args)
     topic = Topic(dp, dds_topic(args.topic), TYPES[args.type], qos=qos(args))
     reader = DataReader(dp, topic, qos=qos(args))
     print(json.dumps({"ready": True}), flush=True)
@@ -182,7 +204,7 @@ def make(args, i):
 
 
 def publish(args):
-    dp = DomainParticipant(args.domain)
+    dp = participant(args)
     topic = Topic(dp, dds_topic(args.topic), TYPES[args.type], qos=qos(args))
     writer = DataWriter(dp, topic, qos=qos(args))
     deadline = time.time() + args.timeout
@@ -221,6 +243,8 @@ def main():
     ap.add_argument("--rate", type=float, default=10.0)
     ap.add_argument("--settle", type=float, default=0.5)
     ap.add_argument("--lie", action="store_true", help="make every odd sample malformed")
+    ap.add_argument("--interface", action="append", default=[],
+                    help="network interface (name) DDS may use, e.g. lo; repeatable")
     args = ap.parse_args()
     return listen(args) if args.mode == "listen" else publish(args)
 

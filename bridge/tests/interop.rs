@@ -113,6 +113,7 @@ fn listen(topic: &str, ty: &str, count: usize, domain: u16) -> std::process::Chi
             &count.to_string(),
         ])
         .args(["--timeout", "40", "--domain", &domain.to_string()])
+        .args(["--interface", "lo"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -144,6 +145,7 @@ bus = "local"
 [dds]
 backend = "{backend}"
 domain_id = {domain}
+interfaces = ["lo"]
 [replay]
 bag = "src"
 loop = true
@@ -204,6 +206,7 @@ bus = "local"
 [dds]
 backend = "{backend}"
 domain_id = {domain}
+interfaces = ["lo"]
 [[ingress]]
 topic = "/sensing/camera/image_raw"
 type = "image"
@@ -254,6 +257,7 @@ perturbed = false
             .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/dds_peer.py"))
             .args(["publish", "--topic", topic, "--type", ty, "--count", "6"])
             .args(["--domain", &domain.to_string(), "--rate", "5"])
+            .args(["--interface", "lo"])
             .args(extra)
             .stdout(Stdio::piped())
             .spawn()

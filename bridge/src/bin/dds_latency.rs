@@ -12,6 +12,9 @@
 //! figure covers serialisation, the UDP loopback, reassembly and the reader's hand-over: the
 //! egress latency of the writer's backend towards the reader's, or the ingress latency of the
 //! reader's backend from the writer's. Lost samples (best effort) are counted.
+//!
+//! Both participants use only the loopback interface unless `--interface` says otherwise
+//! (`--interface default` leaves the choice to the DDS implementation).
 
 use perturb_bridge::dds::{self, BackendKind, Qos, Received, Reliability, RosType, TopicSpec};
 use perturb_bridge::frame::{OwnedPayload, monotonic_ns};
@@ -30,6 +33,7 @@ struct Args {
     rate: f64,
     reliable: bool,
     domain: u16,
+    interfaces: Vec<String>,
 }
 
 fn parse() -> Result<Args, String> {
@@ -43,6 +47,7 @@ fn parse() -> Result<Args, String> {
         rate: 10.0,
         reliable: false,
         domain: 42,
+        interfaces: Vec::new(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -64,9 +69,10 @@ fn parse() -> Result<Args, String> {
             "--rate" => a.rate = v()?.parse().map_err(|e| format!("--rate: {e}"))?,
             "--domain" => a.domain = v()?.parse().map_err(|e| format!("--domain: {e}"))?,
             "--reliable" => a.reliable = true,
+            "--interface" => a.interfaces.push(v()?),
             "-h" | "--help" => {
                 println!(
-                    "dds_latency --writer rustdds|cyclone --reader rustdds|cyclone (--image WxH | --cloud POINTS) [--count N] [--rate HZ] [--reliable] [--domain D]"
+                    "dds_latency --writer rustdds|cyclone --reader rustdds|cyclone (--image WxH | --cloud POINTS) [--count N] [--rate HZ] [--reliable] [--domain D] [--interface lo|default|NAME|ADDR ...]"
                 );
                 std::process::exit(0);
             }
@@ -76,6 +82,10 @@ fn parse() -> Result<Args, String> {
     if a.image.is_none() && a.cloud.is_none() {
         a.image = Some((1920, 1208));
     }
+    if a.interfaces.is_empty() {
+        a.interfaces.push("lo".into());
+    }
+    a.interfaces.retain(|i| i != "default");
     Ok(a)
 }
 
@@ -98,8 +108,17 @@ fn spec(a: &Args) -> TopicSpec {
     }
 }
 
+fn participant(a: &Args, backend: BackendKind) -> dds::ParticipantConfig {
+    dds::ParticipantConfig {
+        backend,
+        domain_id: a.domain,
+        interfaces: a.interfaces.clone(),
+    }
+}
+
 fn reader(a: &Args) -> Result<(), String> {
-    let backend = dds::backend(a.reader, a.domain, "latency_reader").map_err(|e| e.to_string())?;
+    let backend =
+        dds::backend(&participant(a, a.reader), "latency_reader").map_err(|e| e.to_string())?;
     let mut r = backend.reader(&spec(a)).map_err(|e| e.to_string())?;
     let out = std::io::stdout();
     println!("ready");
@@ -145,7 +164,8 @@ fn writer(a: &Args) -> Result<(), String> {
     });
     rx.recv_timeout(Duration::from_secs(30))
         .map_err(|_| "reader did not start")?;
-    let backend = dds::backend(a.writer, a.domain, "latency_writer").map_err(|e| e.to_string())?;
+    let backend =
+        dds::backend(&participant(a, a.writer), "latency_writer").map_err(|e| e.to_string())?;
     let mut w = backend.writer(&spec(a)).map_err(|e| e.to_string())?;
     let mut frame = match (a.image, a.cloud) {
         (_, Some(n)) => {

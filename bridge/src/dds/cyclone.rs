@@ -12,6 +12,7 @@
 //! and 64 kB datagrams (Cyclone's defaults lose multi-megabyte best-effort samples under load).
 
 use super::cyclone_types as ty;
+use super::interfaces::Interface;
 use super::{DdsBackend, DdsError, DdsReader, DdsWriter, Received, RosType, TopicSpec};
 use crate::frame::Payload;
 use libloading::Library;
@@ -305,8 +306,17 @@ impl Api {
     }
 }
 
-/// The domain configuration used unless `CYCLONEDDS_URI` is set.
-const DOMAIN_XML: &str = "<CycloneDDS><Domain Id=\"any\"><General><MaxMessageSize>65500B</MaxMessageSize></General><Internal><SocketReceiveBufferSize min=\"default\" max=\"8MB\"/><SocketSendBufferSize min=\"default\" max=\"8MB\"/></Internal></Domain></CycloneDDS>";
+/// The domain configuration used unless `CYCLONEDDS_URI` is set (or whenever interfaces are
+/// given): 64 kB datagrams and 8 MB socket buffers, plus `<Interfaces>` when given.
+fn domain_xml(nets: Option<&[Interface]>) -> String {
+    let (interfaces, discovery) = nets
+        .map(super::interfaces::cyclone_xml)
+        .map(|f| (f.general, f.discovery))
+        .unwrap_or_default();
+    format!(
+        "<CycloneDDS><Domain Id=\"any\"><General>{interfaces}<MaxMessageSize>65500B</MaxMessageSize></General>{discovery}<Internal><SocketReceiveBufferSize min=\"default\" max=\"8MB\"/><SocketSendBufferSize min=\"default\" max=\"8MB\"/></Internal></Domain></CycloneDDS>"
+    )
+}
 
 /// libddsc, loaded once per process and never unloaded: Cyclone keeps thread-specific data
 /// whose destructors run when any thread that called into it exits.
@@ -342,11 +352,15 @@ pub struct CycloneBackend {
 }
 
 impl CycloneBackend {
-    /// Loads libddsc and creates a participant on `domain_id`.
-    pub fn new(domain_id: u16) -> Result<Self, DdsError> {
+    /// Loads libddsc and creates a participant on `domain_id`, on the interfaces `nets` when
+    /// given (which then take precedence over `CYCLONEDDS_URI`).
+    pub fn new(domain_id: u16, nets: Option<&[Interface]>) -> Result<Self, DdsError> {
         let api = api()?;
-        if std::env::var_os("CYCLONEDDS_URI").is_none() {
-            let xml = CString::new(DOMAIN_XML).expect("no NUL");
+        if nets.is_some() || std::env::var_os("CYCLONEDDS_URI").is_none() {
+            let xml = CString::new(domain_xml(nets)).map_err(|_| DdsError::Setup {
+                topic: "participant".into(),
+                reason: "interface name with a NUL byte".into(),
+            })?;
             // SAFETY: valid C string; a domain that exists already is reported, not fatal.
             let _ = unsafe { (api.create_domain)(domain_id as u32, xml.as_ptr()) };
         }

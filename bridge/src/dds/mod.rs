@@ -16,6 +16,7 @@
 
 pub mod cyclone;
 mod cyclone_types;
+pub mod interfaces;
 pub mod msgs;
 pub mod rustdds_backend;
 
@@ -248,17 +249,44 @@ pub trait DdsBackend: Send + Sync {
     fn reader(&self, spec: &TopicSpec) -> Result<Box<dyn DdsReader>, DdsError>;
 }
 
-/// Creates a backend with one participant on `domain_id`; `node` names the ROS node.
-pub fn backend(
-    kind: BackendKind,
-    domain_id: u16,
-    node: &str,
-) -> Result<Box<dyn DdsBackend>, DdsError> {
-    match kind {
+/// Where a participant lives: its backend, domain and network interfaces.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ParticipantConfig {
+    /// The DDS implementation.
+    pub backend: BackendKind,
+    /// The DDS domain.
+    pub domain_id: u16,
+    /// The network interfaces DDS may use, by name (`lo`, `eth0`) or IPv4 address; empty means
+    /// the implementation's own choice (Cyclone and RustDDS then pick the machine's
+    /// multicast-capable interfaces, as ROS 2 nodes do by default).
+    pub interfaces: Vec<String>,
+}
+
+impl ParticipantConfig {
+    /// A participant of `backend` on `domain_id` that only uses the loopback interface: what
+    /// tests, benchmarks and single-computer setups use.
+    pub fn loopback(backend: BackendKind, domain_id: u16) -> Self {
+        ParticipantConfig {
+            backend,
+            domain_id,
+            interfaces: vec!["lo".into()],
+        }
+    }
+}
+
+/// Creates a backend with one participant as `cfg` says; `node` names the ROS node.
+pub fn backend(cfg: &ParticipantConfig, node: &str) -> Result<Box<dyn DdsBackend>, DdsError> {
+    let nets = interfaces::resolve(&cfg.interfaces)?;
+    match cfg.backend {
         BackendKind::Rustdds => Ok(Box::new(rustdds_backend::RustddsBackend::new(
-            domain_id, node,
+            cfg.domain_id,
+            node,
+            nets.as_deref(),
         )?)),
-        BackendKind::Cyclone => Ok(Box::new(cyclone::CycloneBackend::new(domain_id)?)),
+        BackendKind::Cyclone => Ok(Box::new(cyclone::CycloneBackend::new(
+            cfg.domain_id,
+            nets.as_deref(),
+        )?)),
     }
 }
 

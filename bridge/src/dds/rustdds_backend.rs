@@ -5,6 +5,7 @@
 //! once from the frame bytes into a buffer that RustDDS fragments onto the wire, and a received
 //! sample is decoded in place from RustDDS's reassembly buffer (no owned message is built).
 
+use super::interfaces::Interface;
 use super::{DdsBackend, DdsError, DdsReader, DdsWriter, Received, RosType, TopicSpec};
 use crate::frame::Payload;
 use ros2_client::dds::rustdds::{
@@ -90,10 +91,21 @@ fn setup(topic: &str, e: impl std::fmt::Display) -> DdsError {
 
 impl RustddsBackend {
     /// Creates the participant on `domain_id` with a ROS node named `node` (visible in
-    /// `ros2 node list` once its spinner runs; the bridge starts it).
-    pub fn new(domain_id: u16, node: &str) -> Result<Self, DdsError> {
-        let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
-            .map_err(|e| setup("participant", e))?;
+    /// `ros2 node list` once its spinner runs; the bridge starts it). With `nets`, the
+    /// participant joins multicast groups, sends and advertises locators on those interfaces
+    /// only (and finds same-host peers by unicast to 127.0.0.1 when multicast is unavailable).
+    pub fn new(domain_id: u16, node: &str, nets: Option<&[Interface]>) -> Result<Self, DdsError> {
+        let context = match nets {
+            None => Context::with_options(ContextOptions::new().domain_id(domain_id)),
+            Some(nets) => {
+                let dp = rustdds::DomainParticipantBuilder::new(domain_id)
+                    .with_only_networks(nets.iter().map(|n| n.addr))
+                    .build()
+                    .map_err(|e| setup("participant", e))?;
+                Context::from_domain_participant(dp)
+            }
+        }
+        .map_err(|e| setup("participant", e))?;
         let name = NodeName::new("/", node).map_err(|e| setup("participant", e))?;
         let mut n = context
             .new_node(name, NodeOptions::new().enable_rosout(false))

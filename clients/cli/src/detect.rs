@@ -1,9 +1,9 @@
 //! `perturb detect`: the clustering detector on one point-cloud file.
 
-use crate::files::{Loaded, load, sensor_for};
 use anyhow::{Context, Result, bail};
 use perturb_core::detector::{Detector, DetectorConfig, ObjectClass};
 use perturb_core::lidar::{Box3, Points};
+use perturb_study::files::{Loaded, describe_sensor, load, sensor_for};
 use std::path::PathBuf;
 
 /// Arguments of `perturb detect`.
@@ -114,13 +114,10 @@ pub fn run(a: Args) -> Result<()> {
             a.scan.display()
         ),
     };
-    let sensor = sensor_for(
-        Some(kind),
-        a.sensor.as_deref(),
-        a.forward.as_deref(),
-        None,
-        a.json,
-    )?;
+    let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.forward.as_deref(), None)?;
+    if !a.json {
+        eprintln!("{}", describe_sensor(&sensor));
+    }
     let p = Points::extract(&cloud.view(), &sensor, false)
         .with_context(|| format!("reading the points of {}", a.scan.display()))?;
     let config = match (&a.class, a.objects) {

@@ -1,9 +1,9 @@
 //! `perturb info`.
 
-use crate::files::{Loaded, load};
 use anyhow::{Result, bail};
 use perturb_bag::{Bag, Filter, SensorMessage};
 use perturb_core::formats::FileKind;
+use perturb_study::files::{Loaded, load};
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -42,7 +42,7 @@ pub fn run(a: Args) -> Result<()> {
                     meta.map(|(d, _)| format!(", PCD data {d:?}"))
                         .unwrap_or_default()
                 );
-                let sensor = crate::files::sensor_for(Some(kind), None, None, None, true)?;
+                let sensor = perturb_study::files::sensor_for(Some(kind), None, None, None)?;
                 println!(
                     "sensor model assumed: {} (from the file kind; --sensor, --forward and --intensity-max change it in the other commands)",
                     sensor.describe()
@@ -53,8 +53,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     let bag = Bag::open(&a.input)?;
     println!(
-        "bag {} ({})",
+        "bag {} ({}, {})",
         a.input.display(),
+        bag.format_name(),
         if bag.is_indexed() {
             "indexed"
         } else {
@@ -108,7 +109,7 @@ pub fn run(a: Args) -> Result<()> {
         println!("  {t}: {s}");
     }
     if summary.values().any(|s| s.starts_with("point cloud")) {
-        let sensor = crate::files::sensor_for(None, None, None, None, true)?;
+        let sensor = perturb_study::files::sensor_for(None, None, None, None)?;
         println!(
             "sensor model assumed for the point clouds: {} (ROS convention; --sensor, --forward and --intensity-max change it in the other commands)",
             sensor.describe()
