@@ -82,7 +82,12 @@ fn detector(data: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
             })
             .collect();
         times.sort_by(f64::total_cmp);
-        println!("{f}: {} points, detect median {:.2} ms, max {:.2} ms", p.len(), times[10], times[19]);
+        println!(
+            "{f}: {} points, detect median {:.2} ms, max {:.2} ms",
+            p.len(),
+            times[10],
+            times[19]
+        );
     }
     Ok(())
 }

@@ -7,12 +7,10 @@ use perturb_core::cloud::Cloud;
 use perturb_core::detector::{Detector, DetectorConfig};
 use perturb_core::formats::kitti;
 use perturb_core::lidar::weather::fast::{FastKind, FastWeather, visibility};
+use perturb_core::lidar::weather::fog::{FogModel, FogOutcome, HAHNER_ALPHA};
+use perturb_core::lidar::weather::lisa::{Lisa, Outcome};
 use perturb_core::lidar::{Box3, Points};
 use perturb_core::metrics::{DetectionMetrics, MatchConfig, detection_metrics};
-use perturb_core::lidar::weather::fog::{
-    FogModel, FogOutcome, HAHNER_ALPHA,
-};
-use perturb_core::lidar::weather::lisa::{Lisa, Outcome};
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::rng::Rng;
 use perturb_core::sensors::SensorModel;
@@ -57,7 +55,10 @@ fn kitti_scans(data: &std::path::Path) -> Vec<(&'static str, Cloud)> {
     .into_iter()
     .map(|(name, f)| {
         let bytes = std::fs::read(data.join(f)).expect("read KITTI scan");
-        (name, kitti::decode_kitti(&bytes).expect("decode KITTI scan"))
+        (
+            name,
+            kitti::decode_kitti(&bytes).expect("decode KITTI scan"),
+        )
     })
     .collect()
 }

@@ -71,7 +71,8 @@ impl EvalConfig {
         }
         let (detector, detector_name) = match (class, objects) {
             (Some(c), _) => {
-                let c = ObjectClass::parse(c).map_err(|e| StudyError::Config(format!("--class: {e}")))?;
+                let c = ObjectClass::parse(c)
+                    .map_err(|e| StudyError::Config(format!("--class: {e}")))?;
                 (DetectorConfig::only(c), c.as_str())
             }
             (None, true) => (DetectorConfig::objects(), "objects"),

@@ -266,8 +266,7 @@ pub fn l_shape_heading(xy: &[[f32; 2]], step_deg: f32) -> f32 {
             }
         }
     }
-    let best_theta = best_k as f32 * step;
-    best_theta
+    best_k as f32 * step
 }
 
 /// The smallest rectangle with heading `yaw` enclosing `xy`: (centre, [length, width], heading)

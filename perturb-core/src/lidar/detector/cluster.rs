@@ -222,7 +222,10 @@ impl Clusterer {
         self.zorder.clear();
         self.zorder.extend(0..m as u32);
         for col in 0..cols * rows {
-            let (a, b) = (self.col_start[col] as usize, self.col_start[col + 1] as usize);
+            let (a, b) = (
+                self.col_start[col] as usize,
+                self.col_start[col + 1] as usize,
+            );
             if b - a > 1 {
                 let sorted = &self.sorted;
                 self.zorder[a..b].sort_unstable_by(|&i, &j| {
