@@ -204,3 +204,38 @@ fn every_perturbation_keeps_positions_finite_and_intensity_within_the_scale() {
         .collect();
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+#[test]
+fn real_clouds_in_the_wrong_format_are_not_read_silently() {
+    let Some(data) = common::shared_data("real_clouds_in_the_wrong_format_are_not_read_silently")
+    else {
+        return;
+    };
+    // A real KITTI scan raises no doubt.
+    let bytes = std::fs::read(data.join("kitti/velodyne/000000.bin")).expect("read KITTI scan");
+    assert_eq!(kitti::kitti_doubts(&bytes), Vec::<String>::new());
+    let scan = kitti::decode_kitti(&bytes).unwrap();
+    // The same scan as a nuScenes .pcd.bin (five floats, HDL-32E rings): 115 384 points of 20
+    // bytes are also a whole number of 16-byte KITTI points, and reading them as KITTI warns.
+    let nus = nuscenes_like(&scan, &SensorModel::nuscenes());
+    let nus_bytes = nus.view().data().to_vec();
+    assert_eq!(nus_bytes.len() % 16, 0);
+    let doubts = kitti::kitti_doubts(&nus_bytes);
+    assert!(
+        doubts.len() == 1 && doubts[0].contains("nuScenes"),
+        "{doubts:?}"
+    );
+    // One point fewer: a multiple of 20 bytes but not of 16 is an error that names nuScenes.
+    let err = kitti::decode_kitti(&nus_bytes[..nus_bytes.len() - 20])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("nuScenes"), "{err}");
+    // A real VLP-16 PCD (binary, 32-byte points) with one more point than POINTS announces.
+    let pcd_path = data.join("rosbag2_nebula/vlp16/1673400472138016708.pcd");
+    let mut pcd_bytes = std::fs::read(&pcd_path).expect("read nebula PCD");
+    assert!(pcd::decode(&pcd_bytes).is_ok());
+    let last: Vec<u8> = pcd_bytes[pcd_bytes.len() - 32..].to_vec();
+    pcd_bytes.extend_from_slice(&last);
+    let err = pcd::decode(&pcd_bytes).err().expect("extra point must not be ignored");
+    eprintln!("{err}");
+}
