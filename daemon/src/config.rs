@@ -4,7 +4,7 @@
 
 use crate::perturbation::{self, Active};
 use perturb_core::registry::Modality;
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensors::{Axes, Axis, SensorModel};
 use perturb_wire::{StreamQos, TransportOptions, names};
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
@@ -72,6 +72,14 @@ pub struct StreamConfig {
     /// LiDAR only: full-scale intensity of the clouds, 1 or 255 (default: the sensor model's).
     #[serde(default)]
     pub intensity_max: Option<f32>,
+    /// LiDAR only: the sensor axis that points forward, `+x`, `-x`, `+y` or `-y` (default `+x`,
+    /// the ROS convention; nuScenes' `LIDAR_TOP` is `+y`).
+    #[serde(default)]
+    pub forward: Option<String>,
+    /// LiDAR only: the sensor axis that points up, `+z` or `-z` (default `+z`; `-z` for a sensor
+    /// mounted upside down).
+    #[serde(default)]
+    pub up: Option<String>,
     /// Frames waiting between reception and processing (1 or 2; default 2). When the worker
     /// falls behind, the oldest waiting frame is dropped and counted.
     #[serde(default = "default_queue_depth")]
@@ -131,14 +139,33 @@ impl StreamConfig {
         })
     }
 
-    /// The LiDAR sensor model (with the intensity scale applied).
+    /// The LiDAR sensor model (with the intensity scale and the axes applied).
     pub fn sensor_model(&self) -> Result<SensorModel, String> {
         let name = self.sensor.as_deref().unwrap_or("vlp32c");
         let mut m = SensorModel::by_name(name).map_err(|e| e.to_string())?;
         if let Some(max) = self.intensity_max {
             m = m.with_intensity_max(max);
         }
-        Ok(m)
+        Ok(m.with_axes(self.axes()?))
+    }
+
+    /// The LiDAR's forward and up axes (`forward`, `up`; default x forward, z up).
+    pub fn axes(&self) -> Result<Axes, String> {
+        self.axes_by_key().map_err(|(_, e)| e)
+    }
+
+    /// Like [`StreamConfig::axes`], the error with the key it is about.
+    fn axes_by_key(&self) -> Result<Axes, (&'static str, String)> {
+        let parse = |key: &'static str, v: Option<&str>, default: Axis| {
+            v.map_or(Ok(default), Axis::parse)
+                .map_err(|e| (key, e.to_string()))
+        };
+        let forward = parse("forward", self.forward.as_deref(), Axis::PosX)?;
+        if forward.index_sign().0 == 2 {
+            return Err(("forward", format!("{forward} must be +x, -x, +y or -y")));
+        }
+        let up = parse("up", self.up.as_deref(), Axis::PosZ)?;
+        Axes::new(forward, up).map_err(|e| ("up", e.to_string()))
     }
 
     /// The seed of the initial perturbation (0 if none).
@@ -301,6 +328,11 @@ impl Config {
                             key("intensity_max")
                         ));
                     }
+                    for (k, v) in [("forward", &s.forward), ("up", &s.up)] {
+                        if v.is_some() {
+                            return Err(format!("{}: only LiDAR streams have axes", key(k)));
+                        }
+                    }
                 }
                 Modality::Lidar => {
                     if s.sensor.is_none() {
@@ -309,8 +341,10 @@ impl Config {
                             key("sensor")
                         ));
                     }
-                    s.sensor_model()
+                    SensorModel::by_name(s.sensor.as_deref().unwrap_or("vlp32c"))
                         .map_err(|e| format!("{}: {e}", key("sensor")))?;
+                    s.axes_by_key()
+                        .map_err(|(k, e)| format!("{}: {e}", key(k)))?;
                     if let Some(m) = s.intensity_max
                         && m != 1.0
                         && m != 255.0
@@ -397,5 +431,29 @@ mod tests {
         assert!(e.contains("streams"), "{e}");
         let e = err(&GOOD.replace("modality = \"lidar\"", "modality = \"radar\""));
         assert!(e.contains("radar"), "{e}");
+        let e = err(&format!("{GOOD}forward = \"+z\"\n"));
+        assert!(
+            e.contains("streams[1] (lidar).forward") && e.contains("+z"),
+            "{e}"
+        );
+        let e = err(&format!("{GOOD}forward = \"ahead\"\n"));
+        assert!(
+            e.contains("streams[1] (lidar).forward") && e.contains("ahead"),
+            "{e}"
+        );
+        let e = err(&format!("{GOOD}up = \"+x\"\n"));
+        assert!(e.contains("streams[1] (lidar).up"), "{e}");
+        let e = err(&GOOD.replace("seed = 7 }", "seed = 7 }\n        forward = \"+y\""));
+        assert!(e.contains("streams[0] (cam).forward"), "{e}");
+    }
+
+    #[test]
+    fn lidar_axes_reach_the_sensor_model() {
+        let c = Config::parse(&format!("{GOOD}forward = \"+y\"\n")).unwrap();
+        let m = c.streams[1].sensor_model().unwrap();
+        assert_eq!(m.axes, SensorModel::nuscenes().axes);
+        assert_eq!(m.name, "VLP-32C");
+        let c = Config::parse(GOOD).unwrap();
+        assert!(c.streams[1].sensor_model().unwrap().axes.is_canonical());
     }
 }

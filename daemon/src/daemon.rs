@@ -102,7 +102,13 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
             modality = s.modality.as_str(),
             input = %s.input_service(),
             output = %s.output_service(),
-            sensor = s.sensor_model().map(|m| m.name).unwrap_or("-"),
+            sensor = match s.modality {
+                perturb_core::registry::Modality::Lidar => s
+                    .sensor_model()
+                    .map(|m| m.describe())
+                    .unwrap_or_else(|e| e),
+                perturb_core::registry::Modality::Camera => "-".to_string(),
+            },
             perturbation = initial
                 .as_ref()
                 .map(|a| format!("{} severity {} seed {}", a.spec().entry.id, a.spec().severity, a.spec().seed))

@@ -3,6 +3,7 @@
 //! ```text
 //! cargo run --release -p perturb-core --example bench -- camera 1920 1208 [ID ...]
 //! cargo run --release -p perturb-core --example bench -- lidar [ID ...]
+//! cargo run --release -p perturb-core --example bench -- detector
 //! ```
 //! The data comes from `../shared/data` (or `$PERTURB_SHARED_DATA`); `PERTURB_BENCH_FRAMES` sets
 //! the frames timed per severity (default 10). `perturb bench` is the full
@@ -25,6 +26,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Frames timed per perturbation and severity (the median is reported).
     let frames: usize = std::env::var("PERTURB_BENCH_FRAMES").map_or(Ok(10), |s| s.parse())?;
     let mut rows: Vec<Timing> = Vec::new();
+    if modality == "detector" {
+        return detector(&data);
+    }
     if modality == "camera" {
         let w: u32 = args.get(1).map_or(Ok(1920), |s| s.parse())?;
         let h: u32 = args.get(2).map_or(Ok(1208), |s| s.parse())?;
@@ -60,6 +64,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!(
             "{:<7} {:<24} {:>3} {:>10.2} {:>10.2} {:>10.2}",
             t.id, t.name, t.severity, t.setup_ms, t.median_ms, t.max_ms
+        );
+    }
+    Ok(())
+}
+
+/// The clustering detector alone on the KITTI scans: median of 20 runs per scan.
+fn detector(data: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
+    use perturb_core::detector::{Detector, DetectorConfig};
+    use perturb_core::lidar::Points;
+    for f in ["kitti/velodyne/000000.bin", "kitti/velodyne/000001.bin"] {
+        let scan = kitti::decode_kitti(&std::fs::read(data.join(f))?)?;
+        let p = Points::extract(&scan.view(), &SensorModel::hdl64e(), false)?;
+        let mut d = Detector::new(DetectorConfig::default());
+        let mut times: Vec<f64> = (0..20)
+            .map(|_| {
+                let t = std::time::Instant::now();
+                std::hint::black_box(d.detect(&p));
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        times.sort_by(f64::total_cmp);
+        println!(
+            "{f}: {} points, detect median {:.2} ms, max {:.2} ms",
+            p.len(),
+            times[10],
+            times[19]
         );
     }
     Ok(())

@@ -14,7 +14,6 @@
 pub mod bench;
 pub mod camera;
 pub mod cloud;
-pub mod detector;
 pub mod error;
 pub mod formats;
 pub mod image;
@@ -29,3 +28,4 @@ pub mod synthetic;
 pub mod viz;
 
 pub use error::{Error, Result};
+pub use lidar::detector;

@@ -166,7 +166,9 @@ pub struct LidarPerturber {
     points: Points,
     plan: Plan,
     detector: Option<Detector>,
+    /// Boxes of the current cloud in the canonical frame, and in the sensor frame.
     boxes: Vec<Box3>,
+    sensor_boxes: Vec<Box3>,
 }
 
 impl std::fmt::Debug for LidarPerturber {
@@ -203,7 +205,7 @@ impl LidarPerturber {
         let detector = perturbation
             .needs()
             .boxes
-            .then(|| Detector::new(DetectorConfig::objects()));
+            .then(|| Detector::new(DetectorConfig::default()));
         Ok(LidarPerturber {
             spec,
             sensor,
@@ -212,6 +214,7 @@ impl LidarPerturber {
             plan: Plan::default(),
             detector,
             boxes: Vec::new(),
+            sensor_boxes: Vec::new(),
         })
     }
 
@@ -223,10 +226,10 @@ impl LidarPerturber {
         }
     }
 
-    /// The boxes the last cloud was perturbed with: the caller's, or the detector's on the
-    /// unperturbed cloud (empty for perturbations that do not use boxes).
+    /// The boxes the last cloud was perturbed with, in the sensor's frame: the caller's, or the
+    /// detector's on the unperturbed cloud (empty for perturbations that do not use boxes).
     pub fn last_boxes(&self) -> &[Box3] {
-        &self.boxes
+        &self.sensor_boxes
     }
 
     /// The configuration.
@@ -286,14 +289,22 @@ impl LidarPerturber {
     ) -> Result<()> {
         let needs = self.perturbation.needs();
         self.points.fill(input, &self.sensor, needs.ring)?;
+        let axes = self.sensor.axes;
         self.boxes.clear();
+        self.sensor_boxes.clear();
         if needs.boxes {
             match boxes {
-                Some(b) => self.boxes.extend_from_slice(b),
-                None => self
-                    .detector
-                    .get_or_insert_with(|| Detector::new(DetectorConfig::objects()))
-                    .detect_into(&self.points, &mut self.boxes),
+                Some(b) => {
+                    self.sensor_boxes.extend_from_slice(b);
+                    self.boxes.extend(b.iter().map(|b| b.to_canonical(&axes)));
+                }
+                None => {
+                    self.detector
+                        .get_or_insert_with(|| Detector::new(DetectorConfig::default()))
+                        .detect_into(&self.points, &mut self.boxes);
+                    self.sensor_boxes
+                        .extend(self.boxes.iter().map(|b| b.to_sensor(&axes)));
+                }
             }
         }
         self.plan.clear();
@@ -305,6 +316,7 @@ impl LidarPerturber {
             },
             &mut self.plan,
         );
+        self.plan.positions_to_sensor(&axes);
         Ok(())
     }
 }

@@ -3,111 +3,17 @@
 
 mod common;
 
-use perturb_core::lidar::Points;
-use perturb_core::lidar::weather::fast::{FAST_CALIBRATION, FastKind, FastWeather};
-use perturb_core::lidar::weather::fog::{
-    FogModel, FogOutcome, HAHNER_ALPHA, MULTICORRUPT_ALPHA_BETA,
-};
+use perturb_core::cloud::Cloud;
+use perturb_core::detector::{Detector, DetectorConfig};
+use perturb_core::formats::kitti;
+use perturb_core::lidar::weather::fast::{FastKind, FastWeather, visibility};
+use perturb_core::lidar::weather::fog::{FogModel, FogOutcome, HAHNER_ALPHA};
 use perturb_core::lidar::weather::lisa::{Lisa, Outcome};
+use perturb_core::lidar::{Box3, Points};
+use perturb_core::metrics::{DetectionMetrics, MatchConfig, detection_metrics};
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::rng::Rng;
 use perturb_core::sensors::SensorModel;
-
-/// The physics counterpart's retention caused by the weather: the share of the points the model
-/// returns from their surface in clear weather that it still returns at each severity, measured on
-/// `points`. (LISA's detection floor drops returns with near-zero reflectance even in clear air,
-/// about 10% of KITTI's points; that loss is not the weather's and is factored out.)
-fn physics_retention(kind: FastKind, points: &Points, sensor: &SensorModel) -> [f64; 3] {
-    let p_min = 0.9 / (120.0f64 * 120.0);
-    let clear = match kind {
-        FastKind::Fog => points.len(),
-        _ => (0..points.len())
-            .filter(|&i| {
-                let r = points.range(i) as f64;
-                r <= 0.9 || (points.intensity(i) / points.intensity_max) as f64 / (r * r) >= p_min
-            })
-            .count(),
-    };
-    std::array::from_fn(|lvl| {
-        let sev = lvl as u8 + 1;
-        let n = clear as f64;
-        let mut rng = Rng::for_setup(1, 7);
-        let kept = match kind {
-            FastKind::Fog => {
-                let (alpha, beta) = MULTICORRUPT_ALPHA_BETA[lvl];
-                let m = FogModel::multicorrupt(alpha, beta);
-                (0..points.len())
-                    .filter(|&i| {
-                        let i255 = points.intensity(i) as f64 / points.intensity_max as f64 * 255.0;
-                        matches!(
-                            m.simulate(points.range(i) as f64, i255, &mut rng),
-                            FogOutcome::Attenuated(_)
-                        )
-                    })
-                    .count()
-            }
-            FastKind::Rain | FastKind::Snow => {
-                let id = if kind == FastKind::Rain {
-                    "L-A5"
-                } else {
-                    "L-A1"
-                };
-                let setup = perturb_core::lidar::LidarSetup {
-                    severity: sev,
-                    seed: 1,
-                    sensor: sensor.clone(),
-                };
-                let lisa = lisa_of(id, &setup);
-                (0..points.len())
-                    .filter(|&i| {
-                        let inten = (points.intensity(i) / points.intensity_max) as f64;
-                        matches!(
-                            lisa.simulate(points.range(i) as f64, inten, &mut rng),
-                            Outcome::Kept { .. }
-                        )
-                    })
-                    .count()
-            }
-        };
-        kept as f64 / n
-    })
-}
-
-fn lisa_of(id: &str, setup: &perturb_core::lidar::LidarSetup) -> Lisa {
-    use perturb_core::lidar::weather::lisa::Precipitation;
-    Lisa::new(
-        if id == "L-A5" {
-            Precipitation::Rain
-        } else {
-            Precipitation::Snow
-        },
-        setup,
-    )
-}
-
-#[test]
-#[ignore = "prints the calibration of the lightweight models; run with --ignored --nocapture"]
-fn calibrate_fast_models() {
-    let Some(scan) = common::kitti_scan("calibrate_fast_models", 0) else {
-        return;
-    };
-    let sensor = SensorModel::hdl64e();
-    let pts = Points::extract(&scan.view(), &sensor, false).unwrap();
-    for kind in [FastKind::Snow, FastKind::Rain, FastKind::Fog] {
-        let phys = physics_retention(kind, &pts, &sensor);
-        let row: Vec<String> = phys
-            .iter()
-            .map(|&target| {
-                let a = FastWeather::fit_alpha(kind, &pts, target);
-                format!(
-                    "({a:.6}, {target:.4}, {:.4})",
-                    FastWeather::new(kind, a).expected_retention(&pts)
-                )
-            })
-            .collect();
-        println!("(FastKind::{kind:?}, [{}]),", row.join(", "));
-    }
-}
 
 #[test]
 #[ignore = "prints how much of KITTI 000000 the Hahner fog (L-A7) returns from its surface"]
@@ -139,62 +45,145 @@ fn hahner_fog_retention_on_kitti() {
     }
 }
 
+/// The shared KITTI scans (000000, 000001: full HDL-64E scans; 000008: camera view only).
+fn kitti_scans(data: &std::path::Path) -> Vec<(&'static str, Cloud)> {
+    [
+        ("000000", "kitti/velodyne/000000.bin"),
+        ("000001", "kitti/velodyne/000001.bin"),
+        ("000008", "kitti_000008_mmdet3d/000008_velodyne_reduced.bin"),
+    ]
+    .into_iter()
+    .map(|(name, f)| {
+        let bytes = std::fs::read(data.join(f)).expect("read KITTI scan");
+        (
+            name,
+            kitti::decode_kitti(&bytes).expect("decode KITTI scan"),
+        )
+    })
+    .collect()
+}
+
+/// Detection retention of `id` at severities 1..3 over `scans`, as `perturb metrics lidar`
+/// computes it: every box the detector finds on the clean scan (all classes), matched one-to-one
+/// within 2 m in the ground plane to the boxes on the perturbed scan, pooled over the scans.
+fn detection_retention(id: &str, scans: &[(&str, Cloud, Vec<Box3>)]) -> [f64; 3] {
+    let sensor = SensorModel::hdl64e();
+    let mut det = Detector::new(DetectorConfig::default());
+    std::array::from_fn(|lvl| {
+        let mut total = DetectionMetrics {
+            retention: 1.0,
+            ..DetectionMetrics::default()
+        };
+        let mut p = LidarPerturber::new(id, lvl as u8 + 1, 1, sensor.clone()).unwrap();
+        for (seq, (_, cloud, base)) in scans.iter().enumerate() {
+            let out = p.apply_owned(&cloud.view(), seq as u64, None).unwrap();
+            let pts = Points::extract(&out.view(), &sensor, false).unwrap();
+            total.add(&detection_metrics(
+                base,
+                &det.detect(&pts),
+                &MatchConfig::default(),
+            ));
+        }
+        total.retention
+    })
+}
+
 #[test]
-fn fast_retention_tracks_physics() {
-    let Some(scan) = common::kitti_scan("fast_retention_tracks_physics", 0) else {
+fn fast_models_degrade_detection_more_than_physics() {
+    let Some(data) = common::shared_data("fast_models_degrade_detection_more_than_physics") else {
+        return;
+    };
+    let sensor = SensorModel::hdl64e();
+    let mut det = Detector::new(DetectorConfig::default());
+    let scans: Vec<(&str, Cloud, Vec<Box3>)> = kitti_scans(&data)
+        .into_iter()
+        .map(|(name, c)| {
+            let boxes = det.detect(&Points::extract(&c.view(), &sensor, false).unwrap());
+            (name, c, boxes)
+        })
+        .collect();
+    let fmt = |r: &[f64; 3]| format!("{:.3} / {:.3} / {:.3}", r[0], r[1], r[2]);
+    let mut failures = Vec::new();
+    for (fast, physics) in [
+        ("L-A4", &["L-A1"][..]),
+        ("L-A6", &["L-A5"][..]),
+        ("L-A9", &["L-A7", "L-A8"][..]),
+    ] {
+        let f = detection_retention(fast, &scans);
+        eprintln!("{fast}: detection retention s1..s3 {}", fmt(&f));
+        if !(f[0] > f[1] && f[1] > f[2]) {
+            failures.push(format!("{fast} does not fall with severity: {}", fmt(&f)));
+        }
+        for ph in physics {
+            let r = detection_retention(ph, &scans);
+            eprintln!("{ph}: detection retention s1..s3 {}", fmt(&r));
+            for l in 0..3 {
+                if f[l] >= r[l] {
+                    failures.push(format!(
+                        "{fast} s{}: retention {:.3} not below {ph}'s {:.3}",
+                        l + 1,
+                        f[l],
+                        r[l]
+                    ));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn fast_models_remove_the_expected_share_of_a_real_scan() {
+    let Some(scan) = common::kitti_scan("fast_models_remove_the_expected_share_of_a_real_scan", 0)
+    else {
         return;
     };
     let sensor = SensorModel::hdl64e();
     let pts = Points::extract(&scan.view(), &sensor, false).unwrap();
-    for (kind, table) in FAST_CALIBRATION {
-        let phys = physics_retention(kind, &pts, &sensor);
+    let original: std::collections::HashSet<(u32, u32, u32)> = (0..pts.len())
+        .map(|i| (pts.x[i].to_bits(), pts.y[i].to_bits(), pts.z[i].to_bits()))
+        .collect();
+    for (kind, id) in [
+        (FastKind::Snow, "L-A4"),
+        (FastKind::Rain, "L-A6"),
+        (FastKind::Fog, "L-A9"),
+    ] {
+        let mut last = 1.0;
         for lvl in 0..3 {
-            let (alpha, recorded, _) = table[lvl];
-            let fast = FastWeather::new(kind, alpha).expected_retention(&pts);
-            assert!(
-                (phys[lvl] - recorded).abs() < 0.02,
-                "{kind:?} s{}: physics retention {} drifted from the recorded {recorded}",
-                lvl + 1,
-                phys[lvl]
-            );
-            assert!(
-                (fast - phys[lvl]).abs() < 0.02,
-                "{kind:?} s{}: fast {fast} vs physics {}",
-                lvl + 1,
-                phys[lvl]
-            );
-            // And the perturbation really keeps about that share of the points.
-            let id = match kind {
-                FastKind::Snow => "L-A4",
-                FastKind::Rain => "L-A6",
-                FastKind::Fog => "L-A9",
-            };
+            let alpha = FastWeather::for_severity(kind, lvl).alpha;
+            let expected = FastWeather::new(kind, alpha).expected_retention(&pts);
             let out = LidarPerturber::new(id, lvl as u8 + 1, 5, sensor.clone())
                 .unwrap()
                 .apply_owned(&scan.view(), 0, None)
                 .unwrap();
             let op = Points::extract(&out.view(), &sensor, false).unwrap();
-            let original: std::collections::HashSet<(u32, u32, u32)> = (0..pts.len())
-                .map(|i| (pts.x[i].to_bits(), pts.y[i].to_bits(), pts.z[i].to_bits()))
-                .collect();
+            // Survivors keep their exact position; backscatter returns move in front of the target.
             let kept = (0..op.len())
                 .filter(|&i| {
                     original.contains(&(op.x[i].to_bits(), op.y[i].to_bits(), op.z[i].to_bits()))
                 })
                 .count();
             let measured = kept as f64 / pts.len() as f64;
+            eprintln!(
+                "{id} s{}: {} {}, alpha {alpha:.5}/m, points kept {measured:.4} (expected {expected:.4})",
+                lvl + 1,
+                kind.quantity(),
+                visibility(kind, lvl)
+            );
             assert!(
-                (measured - fast).abs() < 0.01,
-                "{id} s{}: measured {measured} vs expected {fast}",
+                (measured - expected).abs() < 0.01,
+                "{id} s{}: measured {measured} vs expected {expected}",
                 lvl + 1
             );
+            assert!(measured < last, "{id}: retention must fall with severity");
+            last = measured;
         }
     }
 }
 
 #[test]
 fn fog_fast_survival_follows_exp_minus_alpha_d() {
-    use perturb_core::cloud::{Cloud, PointLayout};
+    use perturb_core::cloud::PointLayout;
     // 20 000 points at each of 10 ranges; the highest severity's alpha.
     let ranges = [
         5.0f32, 10.0, 20.0, 30.0, 40.0, 60.0, 80.0, 100.0, 120.0, 150.0,
@@ -211,12 +200,7 @@ fn fog_fast_survival_follows_exp_minus_alpha_d() {
     let cloud = Cloud::from_xyzi(&PointLayout::xyzi_f32(), &pts);
     let sensor = SensorModel::hdl64e();
     let p = LidarPerturber::new("L-A9", 3, 11, sensor.clone()).unwrap();
-    let alpha = FAST_CALIBRATION
-        .iter()
-        .find(|(k, _)| *k == FastKind::Fog)
-        .unwrap()
-        .1[2]
-        .0;
+    let alpha = FastWeather::for_severity(FastKind::Fog, 2).alpha;
     let mut p = p;
     let out = p.apply_owned(&cloud.view(), 0, None).unwrap();
     let o = Points::extract(&out.view(), &sensor, false).unwrap();

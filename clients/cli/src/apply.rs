@@ -38,6 +38,9 @@ pub struct Args {
     /// LiDAR sensor model: vlp32c, vlp16, hdl32e, hdl64e (default: hdl64e for KITTI .bin, vlp32c otherwise).
     #[arg(long)]
     sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    forward: Option<String>,
     /// Full-scale intensity of the cloud, 1 or 255 (default: the sensor model's).
     #[arg(long)]
     intensity_max: Option<f32>,
@@ -93,7 +96,12 @@ pub fn run(a: Args) -> Result<()> {
                     a.input.display()
                 );
             }
-            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max)?;
+            let sensor = sensor_for(
+                Some(kind),
+                a.sensor.as_deref(),
+                a.forward.as_deref(),
+                a.intensity_max,
+            )?;
             eprintln!("{}", describe_sensor(&sensor));
             let mut p = LidarPerturber::from_spec(spec, sensor)?;
             let out = p
@@ -108,7 +116,12 @@ pub fn run(a: Args) -> Result<()> {
 
 fn apply_bag(a: &Args, spec: Spec) -> Result<()> {
     let bag = Bag::open(&a.input)?;
-    let sensor = sensor_for(None, a.sensor.as_deref(), a.intensity_max)?;
+    let sensor = sensor_for(
+        None,
+        a.sensor.as_deref(),
+        a.forward.as_deref(),
+        a.intensity_max,
+    )?;
     eprintln!("{}", describe_sensor(&sensor));
     perturb_study::perturb_bag::perturb_bag(
         &bag,

@@ -38,6 +38,9 @@ pub struct Args {
     /// LiDAR sensor model.
     #[arg(long)]
     sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    forward: Option<String>,
     /// LiDAR full-scale intensity, 1 or 255.
     #[arg(long)]
     intensity_max: Option<f32>,
@@ -54,6 +57,7 @@ pub fn run(a: Args) -> Result<()> {
         seed: a.seed,
         no_clean: a.no_clean,
         sensor: a.sensor,
+        forward: a.forward,
         intensity_max: a.intensity_max,
     };
     let o = perturb_study::augment::run(&opts, &Notes)?;

@@ -50,6 +50,9 @@ pub struct Args {
     /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
     #[arg(long)]
     pub sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    pub forward: Option<String>,
     /// Full-scale intensity of the clouds, 1 or 255.
     #[arg(long)]
     pub intensity_max: Option<f32>,
@@ -78,6 +81,7 @@ pub fn run(a: Args) -> Result<()> {
         },
         seed: a.seed,
         sensor: a.sensor,
+        forward: a.forward,
         intensity_max: a.intensity_max,
         topics: a.topic,
         lidar_metrics: a.lidar_metrics,

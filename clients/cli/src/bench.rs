@@ -65,6 +65,9 @@ pub struct Args {
     /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
     #[arg(long)]
     sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    forward: Option<String>,
     /// Full-scale intensity of the cloud, 1 or 255.
     #[arg(long)]
     intensity_max: Option<f32>,
@@ -175,7 +178,12 @@ pub fn run(a: Args) -> Result<()> {
             }
         }
         (Modality::Lidar, Loaded::Cloud(cloud, kind, _)) => {
-            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max)?;
+            let sensor = sensor_for(
+                Some(kind),
+                a.sensor.as_deref(),
+                a.forward.as_deref(),
+                a.intensity_max,
+            )?;
             eprintln!("{}", describe_sensor(&sensor));
             eprintln!(
                 "lidar bench on {} ({} points), {} thread(s)",

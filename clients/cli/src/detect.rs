@@ -1,24 +1,25 @@
 //! `perturb detect`: the clustering detector on one point-cloud file.
 
 use anyhow::{Context, Result, bail};
-use perturb_core::detector::{Detector, DetectorConfig};
+use perturb_core::detector::{Detector, DetectorConfig, ObjectClass};
 use perturb_core::lidar::{Box3, Points};
-use perturb_core::sensors::SensorModel;
-use perturb_study::files::{Loaded, load};
+use perturb_study::files::{Loaded, describe_sensor, load, sensor_for};
 use std::path::PathBuf;
 
 /// Arguments of `perturb detect`.
 #[derive(clap::Args)]
 #[command(
     after_help = "The detector is the one the LiDAR metrics and the object-level perturbations use, after
-Autoware Mini's lidar_cluster: crop to x, y in [-60, 60) m and z in [-2.5, 0.1) m (sensor frame,
-ego box removed), grid ground removal (0.6 m cells, 0.15 m tolerance), 0.25 m voxel grid, DBSCAN
-(eps 0.7 m, 4 samples), minimum-area boxes. It has no classifier: walls and vegetation are
-clusters too (--objects drops the ones too large to be a road user).
+Autoware Mini's lidar_cluster: x, y within 60 m (ego box removed), a ground that follows the
+terrain (0.6 m cells, slopes up to 0.2), DBSCAN above it (0.25 m voxels, eps 0.5 m, 4 samples),
+clusters longer than a bus split or dropped, L-shape boxes with a heading, and a class per box
+from its shape: vehicle, pedestrian (pedestrian or cyclist sized) or other. It works in the
+sensor's canonical frame (x forward, z up; --forward says which axis is forward) and prints
+boxes in the cloud's own frame.
 
 Output: one box per line, centre x y z and size length width height in metres, heading (yaw,
-radians, the direction of the length, in (-pi/2, pi/2]) and the number of scan points inside the
-box; --json prints an array of {\"center\": [x,y,z], \"size\": [l,w,h], \"yaw\": rad, \"points\": n}.
+radians, about +z), class and the number of scan points inside the box; --json prints an array
+of {\"center\": [x,y,z], \"size\": [l,w,h], \"yaw\": rad, \"class\": \"vehicle\", \"points\": n}.
 
 Examples:
   perturb detect scan.bin
@@ -31,13 +32,19 @@ pub struct Args {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// LiDAR sensor model used to read the cloud: vlp32c, vlp16, hdl32e, hdl64e (only the
-    /// intensity scale depends on it; the detector uses x, y, z).
+    /// LiDAR sensor model used to read the cloud: vlp32c, vlp16, hdl32e, hdl64e (default:
+    /// hdl64e for KITTI .bin, hdl32e for nuScenes .pcd.bin, vlp32c otherwise).
     #[arg(long)]
     pub sensor: Option<String>,
-    /// Drop clusters too large to be a road user (longer than 20 m or over 50 m^2).
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    pub forward: Option<String>,
+    /// Only the boxes classed as road users (vehicle, pedestrian).
     #[arg(long)]
     pub objects: bool,
+    /// Only the boxes of this class: vehicle, pedestrian or other.
+    #[arg(long)]
+    pub class: Option<String>,
 }
 
 /// A detected box and the scan points inside it.
@@ -49,6 +56,8 @@ pub struct Detection {
     pub size: [f32; 3],
     /// Heading of the length, radians.
     pub yaw: f32,
+    /// `vehicle`, `pedestrian` (pedestrian or cyclist sized) or `other`.
+    pub class: ObjectClass,
     /// Points of the scan inside the box.
     pub points: usize,
 }
@@ -98,34 +107,42 @@ pub fn points_in_boxes(p: &Points, boxes: &[Box3]) -> Vec<usize> {
 
 /// Runs `perturb detect`.
 pub fn run(a: Args) -> Result<()> {
-    let cloud = match load(&a.scan)? {
-        Loaded::Cloud(c, _, _) => c,
+    let (cloud, kind) = match load(&a.scan)? {
+        Loaded::Cloud(c, kind, _) => (c, kind),
         Loaded::Image(..) => bail!(
             "{} is an image; `perturb detect` needs a point cloud (.bin .pcd.bin .pcd)",
             a.scan.display()
         ),
     };
-    let sensor = match a.sensor.as_deref() {
-        Some(s) => SensorModel::by_name(s)?,
-        None => SensorModel::default(),
-    };
+    let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.forward.as_deref(), None)?;
+    if !a.json {
+        eprintln!("{}", describe_sensor(&sensor));
+    }
     let p = Points::extract(&cloud.view(), &sensor, false)
         .with_context(|| format!("reading the points of {}", a.scan.display()))?;
-    let config = if a.objects {
-        DetectorConfig::objects()
-    } else {
-        DetectorConfig::default()
+    let config = match (&a.class, a.objects) {
+        (Some(c), _) => DetectorConfig::only(
+            ObjectClass::parse(c).map_err(|e| anyhow::anyhow!("--class: {e}"))?,
+        ),
+        (None, true) => DetectorConfig::objects(),
+        (None, false) => DetectorConfig::default(),
     };
-    let boxes = Detector::new(config).detect(&p);
+    let found = Detector::new(config).detect_classified(&p);
+    let boxes: Vec<Box3> = found.iter().map(|d| d.bbox).collect();
     let counts = points_in_boxes(&p, &boxes);
-    let dets: Vec<Detection> = boxes
+    let dets: Vec<Detection> = found
         .iter()
         .zip(&counts)
-        .map(|(b, &n)| Detection {
-            center: b.center,
-            size: b.size,
-            yaw: b.yaw,
-            points: n,
+        .map(|(d, &n)| {
+            // Reported in the cloud's own frame.
+            let b = d.bbox.to_sensor(&sensor.axes);
+            Detection {
+                center: b.center,
+                size: b.size,
+                yaw: b.yaw,
+                class: d.class,
+                points: n,
+            }
         })
         .collect();
     if a.json {
@@ -148,12 +165,12 @@ pub fn run(a: Args) -> Result<()> {
         dets.len()
     );
     println!(
-        "{:>4} {:>8} {:>8} {:>7} {:>7} {:>6} {:>6} {:>7} {:>7}",
-        "#", "x", "y", "z", "length", "width", "height", "yaw", "points"
+        "{:>4} {:>8} {:>8} {:>7} {:>7} {:>6} {:>6} {:>7} {:<10} {:>7}",
+        "#", "x", "y", "z", "length", "width", "height", "yaw", "class", "points"
     );
     for (i, d) in dets.iter().enumerate() {
         println!(
-            "{:>4} {:>8.2} {:>8.2} {:>7.2} {:>7.2} {:>6.2} {:>6.2} {:>7.3} {:>7}",
+            "{:>4} {:>8.2} {:>8.2} {:>7.2} {:>7.2} {:>6.2} {:>6.2} {:>7.3} {:<10} {:>7}",
             i,
             d.center[0],
             d.center[1],
@@ -162,6 +179,7 @@ pub fn run(a: Args) -> Result<()> {
             d.size[1],
             d.size[2],
             d.yaw,
+            d.class.as_str(),
             d.points
         );
     }

@@ -40,6 +40,9 @@ pub struct Args {
     /// LiDAR sensor model.
     #[arg(long)]
     sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    #[arg(long, allow_hyphen_values = true)]
+    forward: Option<String>,
     /// LiDAR full-scale intensity, 1 or 255.
     #[arg(long)]
     intensity_max: Option<f32>,
@@ -60,6 +63,7 @@ pub fn run(a: Args) -> Result<()> {
         },
         range: a.range,
         sensor: a.sensor,
+        forward: a.forward,
         intensity_max: a.intensity_max,
     };
     let sheet = perturb_study::gallery::render(&opts, &Notes)?;

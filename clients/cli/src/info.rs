@@ -25,7 +25,7 @@ pub fn run(a: Args) -> Result<()> {
     if kind != FileKind::Mcap {
         match load(&a.input)? {
             Loaded::Image(img, _) => println!("image {}x{} {}", img.width, img.height, img.format),
-            Loaded::Cloud(c, _, meta) => {
+            Loaded::Cloud(c, kind, meta) => {
                 let fields: Vec<String> = c
                     .layout
                     .fields
@@ -41,6 +41,11 @@ pub fn run(a: Args) -> Result<()> {
                     fields.join(" "),
                     meta.map(|(d, _)| format!(", PCD data {d:?}"))
                         .unwrap_or_default()
+                );
+                let sensor = perturb_study::files::sensor_for(Some(kind), None, None, None)?;
+                println!(
+                    "sensor model assumed: {} (from the file kind; --sensor, --forward and --intensity-max change it in the other commands)",
+                    sensor.describe()
                 );
             }
         }
@@ -102,6 +107,13 @@ pub fn run(a: Args) -> Result<()> {
     })?;
     for (t, s) in &summary {
         println!("  {t}: {s}");
+    }
+    if summary.values().any(|s| s.starts_with("point cloud")) {
+        let sensor = perturb_study::files::sensor_for(None, None, None, None)?;
+        println!(
+            "sensor model assumed for the point clouds: {} (ROS convention; --sensor, --forward and --intensity-max change it in the other commands)",
+            sensor.describe()
+        );
     }
     println!("{} messages read", report.delivered);
     for n in &report.notes {

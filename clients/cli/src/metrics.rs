@@ -95,13 +95,19 @@ Examples:
         /// Largest centre distance of a match in the ground plane, metres.
         #[arg(long, default_value_t = 2.0)]
         match_distance: f32,
-        /// Drop clusters too large to be a road user (longer than 20 m or over 50 m^2), as the
-        /// object-level perturbations do; by default every cluster counts, as in Autoware Mini.
+        /// Count only the boxes classed as road users (vehicle, pedestrian/cyclist-sized); by
+        /// default every box counts, as the object-level perturbations use them.
         #[arg(long)]
         objects: bool,
-        /// LiDAR sensor model used to read the clouds (only the intensity scale depends on it).
+        /// Count only the boxes of this class: vehicle, pedestrian or other.
+        #[arg(long)]
+        class: Option<String>,
+        /// LiDAR sensor model used to read the clouds (its intensity scale and axes).
         #[arg(long)]
         sensor: Option<String>,
+        /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+        #[arg(long, allow_hyphen_values = true)]
+        forward: Option<String>,
         /// Bags: only these PointCloud2 topics (repeatable; default all).
         #[arg(long)]
         topic: Vec<String>,
@@ -142,7 +148,9 @@ pub fn run(a: Args) -> Result<()> {
             ids,
             match_distance,
             objects,
+            class,
             sensor,
+            forward,
             topic,
             threads,
             quiet,
@@ -174,8 +182,13 @@ pub fn run(a: Args) -> Result<()> {
                     perturbed.display()
                 );
             }
-            let cfg =
-                lidar_eval::EvalConfig::new(objects, match_distance, sensor.as_deref(), topic)?;
+            let cfg = lidar_eval::EvalConfig::new(
+                objects,
+                class.as_deref(),
+                match_distance,
+                (sensor.as_deref(), forward.as_deref()),
+                topic,
+            )?;
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
                 .build()?;

@@ -40,6 +40,8 @@ pub struct AugmentOptions {
     pub no_clean: bool,
     /// LiDAR sensor model.
     pub sensor: Option<String>,
+    /// LiDAR forward axis (`+x`, `-x`, `+y`, `-y`; default per file kind).
+    pub forward: Option<String>,
     /// LiDAR full-scale intensity, 1 or 255.
     pub intensity_max: Option<f32>,
 }
@@ -77,7 +79,12 @@ pub fn run(a: &AugmentOptions, progress: &dyn Progress) -> Result<AugmentOutcome
     let sets = select(&sel, &[modality], progress)?;
     let sensor = if modality == Modality::Lidar {
         let kind = perturb_core::formats::FileKind::from_path(&files[0]).ok();
-        let s = sensor_for(kind, a.sensor.as_deref(), a.intensity_max)?;
+        let s = sensor_for(
+            kind,
+            a.sensor.as_deref(),
+            a.forward.as_deref(),
+            a.intensity_max,
+        )?;
         progress.note(&crate::files::describe_sensor(&s));
         Some(s)
     } else {

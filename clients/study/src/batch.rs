@@ -139,8 +139,11 @@ pub struct BatchOptions {
     pub selection: Selection,
     /// Seed.
     pub seed: u64,
-    /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
+    /// LiDAR sensor model (default: hdl64e for KITTI .bin, hdl32e for nuScenes .pcd.bin, vlp32c
+    /// otherwise).
     pub sensor: Option<String>,
+    /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).
+    pub forward: Option<String>,
     /// Full-scale intensity of the clouds, 1 or 255.
     pub intensity_max: Option<f32>,
     /// Bags: only perturb these topics.
@@ -168,6 +171,7 @@ struct Manifest<'a> {
     input: String,
     seed: u64,
     sensor: Option<&'a str>,
+    forward: Option<&'a str>,
     intensity_max: Option<f32>,
     sets: Vec<String>,
 }
@@ -196,6 +200,7 @@ pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome>
         input: opts.input.display().to_string(),
         seed: opts.seed,
         sensor: opts.sensor.as_deref(),
+        forward: opts.forward.as_deref(),
         intensity_max: opts.intensity_max,
         sets: sets
             .iter()
@@ -229,7 +234,12 @@ pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome>
             progress.set_length((todo.len() * files.len()) as u64);
             let sensor = if *modality == Modality::Lidar {
                 let kind = perturb_core::formats::FileKind::from_path(&files[0]).ok();
-                let s = sensor_for(kind, opts.sensor.as_deref(), opts.intensity_max)?;
+                let s = sensor_for(
+                    kind,
+                    opts.sensor.as_deref(),
+                    opts.forward.as_deref(),
+                    opts.intensity_max,
+                )?;
                 progress.note(&crate::files::describe_sensor(&s));
                 Some(s)
             } else {
@@ -244,7 +254,12 @@ pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome>
             let bag = Bag::open(path)?;
             let total: u64 = bag.topics()?.iter().filter_map(|t| t.message_count).sum();
             progress.set_length(total * todo.len() as u64);
-            let sensor = sensor_for(None, opts.sensor.as_deref(), opts.intensity_max)?;
+            let sensor = sensor_for(
+                None,
+                opts.sensor.as_deref(),
+                opts.forward.as_deref(),
+                opts.intensity_max,
+            )?;
             progress.note(&crate::files::describe_sensor(&sensor));
             todo.par_iter().try_for_each(|set| -> Result<()> {
                 let dir = set.dir(&opts.out);
@@ -305,7 +320,13 @@ fn lidar_metrics(
         progress.note("--lidar-metrics: no LiDAR set in this run, nothing to measure");
         return Ok(None);
     }
-    let cfg = EvalConfig::new(false, 2.0, opts.sensor.as_deref(), opts.topics.clone())?;
+    let cfg = EvalConfig::new(
+        false,
+        None,
+        2.0,
+        (opts.sensor.as_deref(), opts.forward.as_deref()),
+        opts.topics.clone(),
+    )?;
     let report = evaluate(&opts.input, &lidar, &cfg, progress)?;
     for (name, format) in [
         ("lidar_metrics.md", Format::Markdown),

@@ -4,7 +4,7 @@ use crate::error::{Result, StudyError};
 use perturb_core::cloud::{Cloud, CloudView};
 use perturb_core::formats::{FileKind, kitti, pcd, picture};
 use perturb_core::image::{Image, ImageView};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensors::{Axes, Axis, SensorModel};
 use std::path::Path;
 
 /// A decoded input file.
@@ -20,7 +20,8 @@ pub fn kind_of(path: &Path) -> Result<FileKind> {
     Ok(FileKind::from_path(path)?)
 }
 
-/// Reads and decodes an image or point-cloud file.
+/// Reads and decodes an image or point-cloud file. Doubts about a KITTI `.bin` and bytes a PCD
+/// file's reader ignored are printed as warnings on stderr (never silent).
 pub fn load(path: &Path) -> Result<Loaded> {
     let kind = kind_of(path)?;
     if kind == FileKind::Mcap {
@@ -35,12 +36,21 @@ pub fn load(path: &Path) -> Result<Loaded> {
         FileKind::Png | FileKind::Jpeg => {
             Loaded::Image(picture::decode(&bytes).map_err(bad)?, kind)
         }
-        FileKind::KittiBin => Loaded::Cloud(kitti::decode_kitti(&bytes).map_err(bad)?, kind, None),
+        FileKind::KittiBin => {
+            let cloud = kitti::decode_kitti(&bytes).map_err(bad)?;
+            for doubt in kitti::kitti_doubts(&bytes) {
+                eprintln!("warning: {}: {doubt}", path.display());
+            }
+            Loaded::Cloud(cloud, kind, None)
+        }
         FileKind::NuscenesBin => {
             Loaded::Cloud(kitti::decode_nuscenes(&bytes).map_err(bad)?, kind, None)
         }
         FileKind::Pcd => {
             let f = pcd::decode(&bytes).map_err(bad)?;
+            for w in &f.warnings {
+                eprintln!("warning: {}: {w}", path.display());
+            }
             Loaded::Cloud(f.cloud, kind, Some((f.data, f.viewpoint)))
         }
         FileKind::Mcap => unreachable!("handled above"),
@@ -78,19 +88,31 @@ pub fn save_cloud(
 }
 
 /// The sensor model for a cloud file: `sensor` if given, else HDL-64E for KITTI `.bin` files
-/// (KITTI's sensor, reflectance 0..1) and VLP-32C (intensity 0..255) for everything else;
-/// `intensity_max` overrides the intensity scale. [`describe_sensor`] says which one it is, for
-/// the user.
+/// (KITTI's sensor, reflectance 0..1), HDL-32E for nuScenes `.pcd.bin` files and VLP-32C
+/// (intensity 0..255) for everything else; the forward axis from `forward` (`--forward`) if
+/// given, else +y for nuScenes `.pcd.bin` files (nuScenes' `LIDAR_TOP` looks along +y) and +x
+/// otherwise (ROS, KITTI, Velodyne drivers); `intensity_max` overrides the intensity scale.
+/// [`describe_sensor`] says which one it is, for the user.
 pub fn sensor_for(
     kind: Option<FileKind>,
     sensor: Option<&str>,
+    forward: Option<&str>,
     intensity_max: Option<f32>,
 ) -> Result<SensorModel> {
     let mut m = match sensor {
         Some(name) => SensorModel::by_name(name)?,
         None if kind == Some(FileKind::KittiBin) => SensorModel::hdl64e(),
+        None if kind == Some(FileKind::NuscenesBin) => SensorModel::hdl32e(),
         None => SensorModel::vlp32c(),
     };
+    let axes = match forward {
+        Some(f) => Axis::parse(f)
+            .and_then(|f| Axes::new(f, m.axes.up))
+            .map_err(|e| StudyError::Config(format!("--forward: {e}")))?,
+        None if kind == Some(FileKind::NuscenesBin) => SensorModel::nuscenes().axes,
+        None => m.axes,
+    };
+    m = m.with_axes(axes);
     if let Some(max) = intensity_max {
         if max != 1.0 && max != 255.0 {
             return Err(StudyError::Config(format!(
@@ -105,7 +127,7 @@ pub fn sensor_for(
 /// The line telling the user which sensor model reads the clouds.
 pub fn describe_sensor(m: &SensorModel) -> String {
     format!(
-        "sensor model {} (intensity full scale {}); change with --sensor / --intensity-max",
-        m.name, m.intensity_max
+        "sensor model {}; change with --sensor / --forward / --intensity-max",
+        m.describe()
     )
 }

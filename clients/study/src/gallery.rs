@@ -30,6 +30,8 @@ pub struct GalleryOptions {
     pub range: f32,
     /// LiDAR sensor model.
     pub sensor: Option<String>,
+    /// LiDAR forward axis (`+x`, `-x`, `+y`, `-y`; default per file kind).
+    pub forward: Option<String>,
     /// LiDAR full-scale intensity, 1 or 255.
     pub intensity_max: Option<f32>,
 }
@@ -90,7 +92,12 @@ pub fn render(a: &GalleryOptions, progress: &dyn Progress) -> Result<Image> {
             if entries.is_empty() {
                 return Err(StudyError::Config("no LiDAR perturbation selected".into()));
             }
-            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max)?;
+            let sensor = sensor_for(
+                Some(kind),
+                a.sensor.as_deref(),
+                a.forward.as_deref(),
+                a.intensity_max,
+            )?;
             progress.note(&crate::files::describe_sensor(&sensor));
             let color = a.color_by;
             let size = a.cell_width.max(64);

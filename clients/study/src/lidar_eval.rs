@@ -17,7 +17,7 @@ use crate::error::{Result, StudyError};
 use crate::files::{Loaded, load};
 use crate::progress::Progress;
 use perturb_bag::{Bag, Filter, SensorMessage};
-use perturb_core::detector::{Detector, DetectorConfig};
+use perturb_core::detector::{Detector, DetectorConfig, ObjectClass};
 use perturb_core::lidar::{Box3, Points};
 use perturb_core::metrics::{
     DetectionMetrics, LidarSummary, MatchConfig, detection_metrics, summarize_lidar,
@@ -40,25 +40,28 @@ const BAG_CHUNK: usize = 16;
 pub struct EvalConfig {
     /// The detector's parameters.
     pub detector: DetectorConfig,
-    /// `"default"` or `"objects"`, for the report.
+    /// `"default"`, `"objects"` or the class counted, for the report.
     pub detector_name: &'static str,
     /// Box matching.
     pub matching: MatchConfig,
-    /// Sensor model used to read the clouds (only the intensity scale depends on it; the
-    /// detector uses x, y, z).
+    /// Sensor model used to read the clouds of a bag (its intensity scale and axes).
     pub sensor: SensorModel,
+    /// `--sensor` and `--forward` as given, for the files' own defaults (nuScenes `.pcd.bin`
+    /// files are y-forward HDL-32E clouds unless told otherwise).
+    pub sensor_args: (Option<String>, Option<String>),
     /// Bags: only these PointCloud2 topics (all when empty).
     pub topics: Vec<String>,
 }
 
 impl EvalConfig {
     /// The configuration from the command-line options: the detector's reference parameters
-    /// (`objects`: plus the road-user size limit), the match radius, the sensor model (default
-    /// VLP-32C; it only sets the intensity scale).
+    /// (`objects`: only road users; `class`: only that class), the match radius, the sensor model
+    /// and forward axis (defaults per file kind, see `files::sensor_for`).
     pub fn new(
         objects: bool,
+        class: Option<&str>,
         match_distance: f32,
-        sensor: Option<&str>,
+        (sensor, forward): (Option<&str>, Option<&str>),
         topics: Vec<String>,
     ) -> Result<Self> {
         if !(match_distance.is_finite() && match_distance > 0.0) {
@@ -66,22 +69,32 @@ impl EvalConfig {
                 "--match-distance must be a positive number of metres, not {match_distance}"
             )));
         }
+        let (detector, detector_name) = match (class, objects) {
+            (Some(c), _) => {
+                let c = ObjectClass::parse(c)
+                    .map_err(|e| StudyError::Config(format!("--class: {e}")))?;
+                (DetectorConfig::only(c), c.as_str())
+            }
+            (None, true) => (DetectorConfig::objects(), "objects"),
+            (None, false) => (DetectorConfig::default(), "default"),
+        };
         Ok(EvalConfig {
-            detector: if objects {
-                DetectorConfig::objects()
-            } else {
-                DetectorConfig::default()
-            },
-            detector_name: if objects { "objects" } else { "default" },
+            detector,
+            detector_name,
             matching: MatchConfig {
                 max_center_distance: match_distance,
             },
-            sensor: match sensor {
-                Some(s) => SensorModel::by_name(s)?,
-                None => SensorModel::default(),
-            },
+            sensor: crate::files::sensor_for(None, sensor, forward, None)?,
+            sensor_args: (sensor.map(String::from), forward.map(String::from)),
             topics,
         })
+    }
+
+    /// The sensor model of the cloud file `path`.
+    fn sensor_of(&self, path: &Path) -> Result<SensorModel> {
+        let kind = perturb_core::formats::FileKind::from_path(path).ok();
+        let (s, f) = &self.sensor_args;
+        crate::files::sensor_for(kind, s.as_deref(), f.as_deref(), None)
     }
 }
 
@@ -134,9 +147,10 @@ impl Source {
 /// `topic#index` (bags).
 pub type FrameBoxes = Vec<(String, Vec<Box3>)>;
 
-fn points_of_file(path: &Path, sensor: &SensorModel) -> Result<Points> {
+fn points_of_file(path: &Path, cfg: &EvalConfig) -> Result<Points> {
+    let sensor = cfg.sensor_of(path)?;
     match load(path)? {
-        Loaded::Cloud(c, _, _) => Points::extract(&c.view(), sensor, false).map_err(
+        Loaded::Cloud(c, _, _) => Points::extract(&c.view(), &sensor, false).map_err(
             StudyError::perturb(format!("reading the points of {}", path.display())),
         ),
         Loaded::Image(..) => Err(StudyError::input(path, "is an image, not a point cloud")),
@@ -158,7 +172,7 @@ pub fn detect_source(source: &Source, cfg: &EvalConfig, pb: &dyn Progress) -> Re
                             "is missing (the set is incomplete; rerun `perturb batch` to finish it)",
                         ));
                     }
-                    let p = points_of_file(&path, &cfg.sensor)?;
+                    let p = points_of_file(&path, cfg)?;
                     let boxes = det.detect(&p);
                     pb.inc(1);
                     Ok((rel.display().to_string(), boxes))

@@ -259,8 +259,12 @@ wide_fn! {
 pub const PIXELATE_FACTOR: [f64; 5] = [0.85, 0.55, 0.35, 0.20, 0.10];
 
 /// C-D2 pixelate: blocky low resolution, as the reference intends: the image is reduced to
-/// `floor(W f) x floor(H f)` by area averaging (each small pixel averages the source pixels whose
-/// centres fall in its footprint) and enlarged back with nearest-neighbour sampling.
+/// `floor(W f) x floor(H f)` by area averaging and enlarged back with nearest-neighbour sampling.
+/// Output pixel x (of n) shows small pixel `floor(x s / n)`, and small pixel i averages exactly the
+/// source pixels that show it, `ceil(n i / s) .. ceil(n (i + 1) / s)`: the footprint and the
+/// mapping agree, so a frame made of constant blocks on that grid passes through unchanged and no
+/// content moves (before issue 16 the footprint was rounded down while the mapping rounded up,
+/// which shifted most columns by one pixel at f = 0.85 and made severity 1 stronger than 4).
 ///
 /// Deviation: PerturbationDrive passes its interpolation flags in the `dst` position of
 /// `cv2.resize`, so both resizes are bilinear and the result is blurry rather than blocky; this
@@ -287,9 +291,13 @@ impl CameraPerturbation for Pixelate {
             ((w as f64 * self.factor) as usize).max(1),
             ((h as f64 * self.factor) as usize).max(1),
         );
-        // Footprint of small pixel i along an axis of n pixels: source pixels [n i / s, n (i+1) / s).
-        let span =
-            |i: usize, n: usize, s: usize| (n * i / s, (n * (i + 1) / s).max(n * i / s + 1).min(n));
+        // Footprint of small pixel i along an axis of n pixels: the source pixels x with
+        // floor(x s / n) = i, which the enlargement maps to it: [ceil(n i / s), ceil(n (i+1) / s)),
+        // at least one pixel since s <= n.
+        let span = |i: usize, n: usize, s: usize| {
+            let a = (n * i).div_ceil(s);
+            (a.min(n - 1), (n * (i + 1)).div_ceil(s).clamp(a + 1, n))
+        };
         // Rounded division by a footprint size n through 32.32 reciprocals (exact for the sums
         // of at most a few hundred bytes that occur here).
         let most = (h.div_ceil(sh) + 1) * (w.div_ceil(sw) + 1);
@@ -619,6 +627,35 @@ mod tests {
                         );
                     }
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn pixelate_keeps_blocks_on_its_grid() {
+        // A frame of constant blocks laid on the grid pixelate maps to (output pixel x shows small
+        // pixel floor(x s / n)) passes through unchanged at every severity: nothing shifts.
+        for (w, h) in [(200usize, 100usize), (641, 403), (37, 23)] {
+            for s in 1..=5u8 {
+                let f = PIXELATE_FACTOR[s as usize - 1];
+                let (sw, sh) = (
+                    ((w as f64 * f) as usize).max(1),
+                    ((h as f64 * f) as usize).max(1),
+                );
+                let mut img = Image::new(w as u32, h as u32, PixelFormat::Rgb8);
+                for y in 0..h {
+                    for x in 0..w {
+                        let (i, j) = (x * sw / w, y * sh / h);
+                        let v = [
+                            (i * 37 + j * 11) as u8,
+                            (i * 5 + j * 91) as u8,
+                            (i ^ j) as u8,
+                        ];
+                        img.data[(y * w + x) * 3..][..3].copy_from_slice(&v);
+                    }
+                }
+                let out = run(PIXELATE, s, &img, 0);
+                assert_eq!(out.data, img.data, "{w}x{h} s{s}");
             }
         }
     }

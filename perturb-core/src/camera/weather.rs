@@ -515,9 +515,10 @@ impl CameraPerturbation for Rain {
     }
 }
 
-/// C-C12 snowflakes: particles per 100 at 800 x 503, severities 1..5 (PerturbationDrive
-/// `effects_snowflake_dynamic`: N = 100 (s + 1)).
-pub const SNOWFLAKES: [usize; 5] = [200, 300, 400, 500, 600];
+/// C-C12 snowflakes: flakes at the reference's 320 x 240, severities 1..5 (PerturbationDrive
+/// `effects_snowflake_dynamic`: N = 100 (scale + 1) with its scale 0..4, so 100 .. 500; the
+/// table read 200 .. 600, from severities 1..5 taken for the scale, until issue 16).
+pub const SNOWFLAKES: [usize; 5] = [100, 200, 300, 400, 500];
 
 /// C-C12 snowflakes: driving into snow: soft white flakes stream radially away from the image
 /// centre at constant speed, as the reference moves them, and grow as they come closer. Each flake

@@ -119,6 +119,9 @@ pub struct KittiCalib {
     pub r0_rect: [[f64; 3]; 3],
     /// Velodyne to (unrectified) camera, row-major 3 x 4.
     pub tr_velo_to_cam: [[f64; 4]; 3],
+    /// Projection of the rectified frame into the left colour camera's image (`P2`, row-major
+    /// 3 x 4), if the file has it.
+    pub p2: Option<[[f64; 4]; 3]>,
 }
 
 impl KittiCalib {
@@ -127,6 +130,7 @@ impl KittiCalib {
     pub fn parse(text: &str) -> Result<Self> {
         let mut r0 = None;
         let mut tr = None;
+        let mut p2 = None;
         for line in text.lines() {
             let Some((key, rest)) = line.split_once(':') else {
                 continue;
@@ -142,16 +146,21 @@ impl KittiCalib {
                     }
                     r0 = Some([[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]]);
                 }
-                "Tr_velo_to_cam" | "Tr_velo_cam" => {
+                k @ ("Tr_velo_to_cam" | "Tr_velo_cam" | "P2") => {
                     let v = vals.map_err(|_| bad())?;
                     if v.len() != 12 {
                         return Err(bad());
                     }
-                    tr = Some([
+                    let m = [
                         [v[0], v[1], v[2], v[3]],
                         [v[4], v[5], v[6], v[7]],
                         [v[8], v[9], v[10], v[11]],
-                    ]);
+                    ];
+                    if k == "P2" {
+                        p2 = Some(m);
+                    } else {
+                        tr = Some(m);
+                    }
                 }
                 _ => {}
             }
@@ -160,6 +169,7 @@ impl KittiCalib {
             (Some(r0_rect), Some(tr_velo_to_cam)) => Ok(KittiCalib {
                 r0_rect,
                 tr_velo_to_cam,
+                p2,
             }),
             _ => Err(Error::malformed(
                 "KITTI calib",
@@ -177,6 +187,30 @@ impl KittiCalib {
         let t = &self.tr_velo_to_cam;
         let d = [cam[0] - t[0][3], cam[1] - t[1][3], cam[2] - t[2][3]];
         [0, 1, 2].map(|j| t[0][j] * d[0] + t[1][j] * d[1] + t[2][j] * d[2])
+    }
+
+    /// A point of the velodyne frame in the rectified camera frame.
+    pub fn velo_to_rect(&self, p: [f64; 3]) -> [f64; 3] {
+        let t = &self.tr_velo_to_cam;
+        let cam = [0, 1, 2].map(|k| t[k][0] * p[0] + t[k][1] * p[1] + t[k][2] * p[2] + t[k][3]);
+        let r = &self.r0_rect;
+        [0, 1, 2].map(|k| r[k][0] * cam[0] + r[k][1] * cam[1] + r[k][2] * cam[2])
+    }
+
+    /// The pixel (column, row) of the colour camera image where the velodyne point `p` projects
+    /// with `P2`, or `None` when the file has no `P2` or the point is not in front of the camera.
+    pub fn velo_to_image(&self, p: [f64; 3]) -> Option<[f64; 2]> {
+        let p2 = self.p2.as_ref()?;
+        let r = self.velo_to_rect(p);
+        let q = [0, 1, 2].map(|k| p2[k][0] * r[0] + p2[k][1] * r[1] + p2[k][2] * r[2] + p2[k][3]);
+        (q[2] > 0.1).then(|| [q[0] / q[2], q[1] / q[2]])
+    }
+
+    /// True if the velodyne point `p` projects inside a `width` x `height` image of the colour
+    /// camera (the camera's field of view). False without `P2`.
+    pub fn in_image(&self, p: [f64; 3], width: u32, height: u32) -> bool {
+        self.velo_to_image(p)
+            .is_some_and(|[u, v]| u >= 0.0 && u < width as f64 && v >= 0.0 && v < height as f64)
     }
 
     /// A direction of the rectified camera frame in the velodyne frame (rotation only).

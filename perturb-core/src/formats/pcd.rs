@@ -29,6 +29,8 @@ pub struct PcdFile {
     pub data: PcdData,
     /// The VIEWPOINT line's seven numbers.
     pub viewpoint: [f64; 7],
+    /// What was odd but not wrong enough to refuse the file (bytes ignored after the data).
+    pub warnings: Vec<String>,
 }
 
 fn bad(reason: impl Into<String>) -> Error {
@@ -163,6 +165,7 @@ pub fn decode(bytes: &[u8]) -> Result<PcdFile> {
     }
     let step = layout.point_step as usize;
     let body = &bytes[pos..];
+    let mut warnings = Vec::new();
     let data = match data_kind {
         PcdData::Binary => {
             let need = n * step;
@@ -172,10 +175,20 @@ pub fn decode(bytes: &[u8]) -> Result<PcdFile> {
                     body.len()
                 )));
             }
+            trailing(body.len() - need, step, n, &mut warnings)?;
             body[..need].to_vec()
         }
         PcdData::Ascii => decode_ascii(body, &layout, n)?,
-        PcdData::BinaryCompressed => decode_compressed(body, &layout, n)?,
+        PcdData::BinaryCompressed => {
+            let (data, used) = decode_compressed(body, &layout, n)?;
+            if body.len() > used {
+                warnings.push(format!(
+                    "{} bytes after the compressed data were ignored",
+                    body.len() - used
+                ));
+            }
+            data
+        }
     };
     let dense = dense_xyz(&layout, &data);
     let cloud = Cloud::from_vec(
@@ -190,7 +203,27 @@ pub fn decode(bytes: &[u8]) -> Result<PcdFile> {
         cloud,
         data: data_kind,
         viewpoint,
+        warnings,
     })
+}
+
+/// Bytes after the announced points: whole points mean the header announces fewer points than
+/// the data holds (an error: reading only the first ones would silently drop the rest); less than
+/// a point is padding, ignored with a warning.
+fn trailing(extra: usize, step: usize, n: usize, warnings: &mut Vec<String>) -> Result<()> {
+    if extra == 0 {
+        return Ok(());
+    }
+    if step > 0 && extra >= step {
+        return Err(bad(format!(
+            "the header announces {n} points but the binary data holds {extra} more bytes ({} more whole points of {step} bytes): fix POINTS/WIDTH/HEIGHT, or cut the data",
+            extra / step
+        )));
+    }
+    warnings.push(format!(
+        "{extra} bytes after the {n} announced points (less than one point) were ignored"
+    ));
+    Ok(())
 }
 
 fn dense_xyz(layout: &PointLayout, data: &[u8]) -> bool {
@@ -234,10 +267,17 @@ fn decode_ascii(body: &[u8], layout: &PointLayout, n: usize) -> Result<Vec<u8>> 
             }
         }
     }
+    let more = lines.count();
+    if more > 0 {
+        return Err(bad(format!(
+            "the header announces {n} points but the ascii data has {more} more lines: fix POINTS/WIDTH/HEIGHT, or cut the data"
+        )));
+    }
     Ok(out)
 }
 
-fn decode_compressed(body: &[u8], layout: &PointLayout, n: usize) -> Result<Vec<u8>> {
+/// The points and the bytes of `body` used.
+fn decode_compressed(body: &[u8], layout: &PointLayout, n: usize) -> Result<(Vec<u8>, usize)> {
     if body.len() < 8 {
         return Err(bad(
             "binary_compressed data is shorter than its 8-byte size header",
@@ -270,7 +310,7 @@ fn decode_compressed(body: &[u8], layout: &PointLayout, n: usize) -> Result<Vec<
             src += len;
         }
     }
-    Ok(out)
+    Ok((out, 8 + csize))
 }
 
 /// Decompresses an LZF stream (liblzf format) of known output size.
@@ -576,5 +616,48 @@ mod tests {
             .unwrap_err();
         assert!(err.to_string().contains("SIZE has 1"), "{err}");
         assert!(decode(b"VERSION 0.7\n").is_err());
+    }
+
+    /// The header of `bytes` with `WIDTH`/`POINTS` changed from 300 to `n`.
+    fn announce(bytes: &[u8], n: usize) -> Vec<u8> {
+        let end = bytes.windows(5).position(|w| w == b"DATA ").unwrap();
+        let end = end + bytes[end..].iter().position(|b| *b == b'\n').unwrap() + 1;
+        let head = String::from_utf8_lossy(&bytes[..end])
+            .replace("WIDTH 300", &format!("WIDTH {n}"))
+            .replace("POINTS 300", &format!("POINTS {n}"));
+        let mut out = head.into_bytes();
+        out.extend_from_slice(&bytes[end..]);
+        out
+    }
+
+    #[test]
+    fn more_data_than_the_header_announces_is_not_read_silently() {
+        let c = sample();
+        let vp = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
+        // Binary: 300 points of data under a header announcing 290 is an error naming the count.
+        let bin = encode(&c.view(), PcdData::Binary, vp).unwrap();
+        let err = decode(&announce(&bin, 290)).unwrap_err().to_string();
+        assert!(
+            err.contains("announces 290 points") && err.contains("10 more whole points"),
+            "{err}"
+        );
+        // Less than a point of padding is read, with a warning saying how much was ignored.
+        let mut padded = bin.clone();
+        padded.extend_from_slice(&[0u8; 5]);
+        let f = decode(&padded).unwrap();
+        assert_eq!(f.cloud, c);
+        assert_eq!(f.warnings.len(), 1);
+        assert!(f.warnings[0].contains("5 bytes"), "{:?}", f.warnings);
+        assert!(decode(&bin).unwrap().warnings.is_empty());
+        // Ascii: extra lines are an error too.
+        let txt = encode(&c.view(), PcdData::Ascii, vp).unwrap();
+        let err = decode(&announce(&txt, 298)).unwrap_err().to_string();
+        assert!(err.contains("2 more lines"), "{err}");
+        // Compressed: bytes after the compressed block are reported.
+        let mut z = encode(&c.view(), PcdData::BinaryCompressed, vp).unwrap();
+        z.extend_from_slice(b"junk");
+        let f = decode(&z).unwrap();
+        assert_eq!(f.cloud, c);
+        assert!(f.warnings[0].contains("4 bytes"), "{:?}", f.warnings);
     }
 }

@@ -10,6 +10,7 @@
 //! Output is a pure function of (input, perturbation, severity, seed, sequence number).
 
 pub mod affine;
+pub mod detector;
 pub mod local;
 pub mod motion;
 pub mod noise;
@@ -71,6 +72,30 @@ impl Box3 {
         let lx = dx * c + dy * s;
         let ly = dy * c - dx * s;
         lx.abs() <= self.size[0] * 0.5 && ly.abs() <= self.size[1] * 0.5
+    }
+
+    /// This box (in the canonical frame of `axes`: x forward, z up) in the sensor's frame.
+    pub fn to_sensor(&self, axes: &crate::sensors::Axes) -> Box3 {
+        if axes.is_canonical() {
+            return *self;
+        }
+        Box3 {
+            center: axes.to_sensor(self.center),
+            size: self.size,
+            yaw: axes.yaw_to_sensor(self.yaw),
+        }
+    }
+
+    /// This box (in the sensor's frame) in the canonical frame of `axes`.
+    pub fn to_canonical(&self, axes: &crate::sensors::Axes) -> Box3 {
+        if axes.is_canonical() {
+            return *self;
+        }
+        Box3 {
+            center: axes.to_canonical(self.center),
+            size: self.size,
+            yaw: axes.yaw_to_canonical(self.yaw),
+        }
     }
 }
 

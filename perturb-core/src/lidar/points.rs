@@ -2,17 +2,22 @@
 
 use crate::cloud::{CloudView, FieldReader, names};
 use crate::error::{Error, Result};
-use crate::sensors::SensorModel;
+use crate::sensors::{Axes, SensorModel};
 use rayon::prelude::*;
 
 /// The fields of a cloud as flat arrays (structure of arrays), in point order.
+///
+/// Positions are in the canonical frame of the sensor model's [`Axes`]: x forward, y left, z up
+/// (for the usual x-forward, z-up sensors, the cloud's own coordinates). A perturbation that
+/// moves points plans the new positions in this frame; [`crate::perturber::LidarPerturber`] turns
+/// them back into the sensor's frame ([`Axes::to_sensor`], exact) before writing.
 #[derive(Clone, Debug, Default)]
 pub struct Points {
-    /// x in metres.
+    /// x (forward) in metres.
     pub x: Vec<f32>,
-    /// y in metres.
+    /// y (left) in metres.
     pub y: Vec<f32>,
-    /// z in metres.
+    /// z (up) in metres.
     pub z: Vec<f32>,
     /// Intensity in the cloud's own units (see `intensity_max`), if the layout has one.
     pub intensity: Option<Vec<f32>>,
@@ -22,11 +27,14 @@ pub struct Points {
     pub ring: Option<Vec<u16>>,
     /// True if `ring` was derived from elevation rather than read.
     pub ring_derived: bool,
+    /// The sensor's frame convention the positions were converted from.
+    pub axes: Axes,
 }
 
 impl Points {
-    /// Extracts x, y, z, the intensity and (when `want_ring`) the ring from `cloud`. Fails with a
-    /// clear error if the layout has no float x, y, z.
+    /// Extracts x, y, z (into the canonical frame of `sensor.axes`), the intensity and (when
+    /// `want_ring`) the ring from `cloud`. Fails with a clear error if the layout has no float x,
+    /// y, z.
     pub fn extract(cloud: &CloudView<'_>, sensor: &SensorModel, want_ring: bool) -> Result<Self> {
         let mut p = Points::default();
         p.fill(cloud, sensor, want_ring)?;
@@ -50,6 +58,13 @@ impl Points {
         read(rx, &mut self.x);
         read(ry, &mut self.y);
         read(rz, &mut self.z);
+        self.axes = sensor.axes;
+        if !self.axes.is_canonical() {
+            for i in 0..n {
+                let q = self.axes.to_canonical([self.x[i], self.y[i], self.z[i]]);
+                (self.x[i], self.y[i], self.z[i]) = (q[0], q[1], q[2]);
+            }
+        }
         self.intensity_max = sensor.intensity_max;
         match layout.reader_any(names::INTENSITY) {
             Some(ri) => {
@@ -91,6 +106,12 @@ impl Points {
     #[inline]
     pub fn xyz(&self, i: usize) -> [f32; 3] {
         [self.x[i], self.y[i], self.z[i]]
+    }
+
+    /// Position of point `i` in the sensor's own frame.
+    #[inline]
+    pub fn sensor_xyz(&self, i: usize) -> [f32; 3] {
+        self.axes.to_sensor(self.xyz(i))
     }
 
     /// Euclidean range of point `i` from the sensor origin.
@@ -189,6 +210,19 @@ impl Plan {
         self.xyz.push(xyz);
         self.intensity.push(intensity);
         self.flags.push(flags);
+    }
+
+    /// Turns the new positions (planned in the canonical frame) into the sensor frame of `axes`;
+    /// nothing to do for a canonical sensor.
+    pub fn positions_to_sensor(&mut self, axes: &Axes) {
+        if axes.is_canonical() {
+            return;
+        }
+        for (p, f) in self.xyz.iter_mut().zip(&self.flags) {
+            if f & MOVED != 0 {
+                *p = axes.to_sensor(*p);
+            }
+        }
     }
 
     /// Keeps every input point unchanged.

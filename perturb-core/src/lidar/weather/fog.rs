@@ -15,6 +15,9 @@
 //! 0.9 m to 1 at 1 m, H the step function, by Simpson's rule on 2000 samples; `R_fog` is the argmax
 //! and `I` the maximum over R < r0 (the fog in front of the target). Beyond about 5 m the table is constant, so it is computed to 10 m and held.
 //!
+//! Both variants clamp fog intensities at the full scale (MultiCorrupt's code does not: a
+//! documented deviation, [`FogModel::multicorrupt`]).
+//!
 //! Intensities are on 0..255, as the model's constants assume: clouds with 0..1 intensity (KITTI)
 //! are scaled by their sensor model's explicit full scale and back (the references apply it to 0..1
 //! values directly, which turns nearly every return into fog).
@@ -115,7 +118,8 @@ pub struct FogModel {
     pub beta: f64,
     /// Range noise half-width in metres of a fog return.
     pub noise: f64,
-    /// Clamp fog intensities at 255 (3D-Corruptions-AD) or not (MultiCorrupt).
+    /// Clamp fog intensities at 255, the full scale (3D-Corruptions-AD does; MultiCorrupt does
+    /// not, see [`FogModel::multicorrupt`]).
     pub clamp: bool,
     /// The response table.
     pub table: FogTable,
@@ -148,13 +152,18 @@ impl FogModel {
         }
     }
 
-    /// MultiCorrupt's parameters: explicit beta, noise 10 m, no clamp.
+    /// MultiCorrupt's parameters: explicit beta, noise 10 m.
+    ///
+    /// Deviation: MultiCorrupt omits 3D-Corruptions-AD's clamp of the fog intensity at 255, so at
+    /// its severity 3 (beta 0.05) fog returns reach about 2.8 times the full scale (724 on a
+    /// 0..255 cloud, 2.38 on KITTI's 0..1), values no sensor reports. Here they are clamped at the
+    /// sensor's full scale, as 3D-Corruptions-AD does (issue 16).
     pub fn multicorrupt(alpha: f64, beta: f64) -> Self {
         FogModel {
             alpha,
             beta,
             noise: 10.0,
-            clamp: false,
+            clamp: true,
             table: FogTable::compute(alpha, 10.0),
         }
     }
@@ -180,7 +189,11 @@ impl FogModel {
         let u = rng.uniform(r0 - self.noise, r0 + self.noise).max(0.5);
         FogOutcome::Fog {
             range: r_fog * r0 / u,
-            intensity: if self.clamp { fog.min(255.0) } else { fog },
+            intensity: if self.clamp {
+                fog.clamp(0.0, 255.0)
+            } else {
+                fog
+            },
         }
     }
 
