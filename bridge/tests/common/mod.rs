@@ -64,6 +64,11 @@ pub fn shared_data(sub: &str) -> Option<PathBuf> {
     if p.exists() {
         Some(p)
     } else {
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "{} is absent and CI=true: the real-data tests need ../shared/data",
+            p.display()
+        );
         eprintln!("SKIP: {} is absent", p.display());
         None
     }

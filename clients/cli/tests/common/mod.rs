@@ -38,6 +38,11 @@ pub fn shared(test: &str) -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "{test}: real data not found at {} and CI=true (set PERTURB_SHARED_DATA)",
+            dir.display()
+        );
         eprintln!("skipping {test}: real data not found at {}", dir.display());
         None
     }
