@@ -375,8 +375,7 @@ fn transfer_from_the_command_line() {
 /// severity 3 from t = 5 s on, with the events in `/perturb/events` as `rosbag` writes strings.
 #[test]
 fn analyze_reads_a_ros1_bag_run_written_by_rosbag() {
-    let python =
-        std::env::var("PERTURB_ROS_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".into());
+    let python = std::env::var("PERTURB_ROS_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".into());
     let have = std::process::Command::new(&python)
         .args(["-c", "import rosbag, geometry_msgs.msg, std_msgs.msg"])
         .status()
@@ -456,6 +455,12 @@ with rosbag.Bag(sys.argv[1], 'w') as b:
         (nominal["cte_avg"].as_f64().unwrap() - 0.5).abs() < 1e-6,
         "{nominal}"
     );
-    assert!((rain["cte_avg"].as_f64().unwrap() - 1.0).abs() < 1e-6, "{rain}");
-    assert!((rain["cte_max"].as_f64().unwrap() - 1.0).abs() < 1e-6, "{rain}");
+    assert!(
+        (rain["cte_avg"].as_f64().unwrap() - 1.0).abs() < 1e-6,
+        "{rain}"
+    );
+    assert!(
+        (rain["cte_max"].as_f64().unwrap() - 1.0).abs() < 1e-6,
+        "{rain}"
+    );
 }
