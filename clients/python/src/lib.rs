@@ -721,7 +721,11 @@ fn catalogue<'py>(py: Python<'py>, modality: Option<&str>) -> PyResult<Bound<'py
         d.set_item("name", e.name)?;
         d.set_item("modality", e.modality.as_str())?;
         d.set_item("family", e.family)?;
-        d.set_item("severities", e.severities().collect::<Vec<u8>>())?;
+        // As ints (a Vec<u8> would become `bytes`).
+        d.set_item(
+            "severities",
+            e.severities().map(u32::from).collect::<Vec<u32>>(),
+        )?;
         d.set_item("description", e.description)?;
         d.set_item("reference", e.reference)?;
         out.append(d)?;
