@@ -82,8 +82,8 @@ fn as_ndarray<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyUntypedArra
         return Ok(a.clone());
     }
     let a = numpy_call(obj, "asarray")?;
-    Ok(a.cast_into::<PyUntypedArray>()
-        .map_err(|e| perr(format!("cannot read the input as an array: {e}")))?)
+    a.cast_into::<PyUntypedArray>()
+        .map_err(|e| perr(format!("cannot read the input as an array: {e}")))
 }
 
 fn shape_text(shape: &[usize]) -> String {
