@@ -261,6 +261,27 @@ impl LidarPerturber {
         self.plan.write(input, out)
     }
 
+    /// The first half of [`LidarPerturber::apply`], for callers that allocate the output
+    /// themselves: plans the perturbation of `input` and returns the exact size of the output in
+    /// bytes. [`LidarPerturber::write_planned`] then writes it; together they give the same bytes
+    /// as `apply`.
+    pub fn plan(
+        &mut self,
+        input: &CloudView<'_>,
+        seq: u64,
+        boxes: Option<&[Box3]>,
+    ) -> Result<usize> {
+        self.plan_frame(input, seq, boxes)?;
+        Ok(self.plan.output_bytes(input))
+    }
+
+    /// The second half of [`LidarPerturber::apply`]: writes the cloud planned by the last
+    /// [`LidarPerturber::plan`] of the same `input` into `out` (at least as many bytes as `plan`
+    /// returned) and returns its shape.
+    pub fn write_planned(&self, input: &CloudView<'_>, out: &mut [u8]) -> Result<CloudShape> {
+        self.plan.write(input, out)
+    }
+
     /// Perturbs `input` into a new cloud.
     pub fn apply_owned(
         &mut self,

@@ -330,21 +330,35 @@ impl Drop for Sink {
     }
 }
 
+/// True if `python` can import every module of `modules`. When it cannot, the test is skipped
+/// with a message naming what is missing and how to install it (`install`), or fails if
+/// `PERTURB_REQUIRE_ORACLES=1` (CI).
+pub fn have_python_modules(python: &str, modules: &[&str], install: &str) -> bool {
+    let missing: Vec<&str> = modules
+        .iter()
+        .copied()
+        .filter(|m| {
+            !Command::new(python)
+                .args(["-c", &format!("import {m}")])
+                .output()
+                .is_ok_and(|o| o.status.success())
+        })
+        .collect();
+    if !missing.is_empty() {
+        let what = format!("the python module(s) {} ({install})", missing.join(", "));
+        assert!(
+            std::env::var("PERTURB_REQUIRE_ORACLES").ok().as_deref() != Some("1"),
+            "{what} are missing and PERTURB_REQUIRE_ORACLES=1"
+        );
+        eprintln!("SKIP: {what} are missing");
+    }
+    missing.is_empty()
+}
+
 /// True if the python package `rosbags` (the independent bag reader) can be imported. When it
 /// cannot, the test is skipped with a message, or fails if `PERTURB_REQUIRE_ORACLES=1` (CI).
 pub fn have_rosbags() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import rosbags"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var("PERTURB_REQUIRE_ORACLES").ok().as_deref() != Some("1"),
-            "rosbags is missing and PERTURB_REQUIRE_ORACLES=1"
-        );
-        eprintln!("SKIP: the python package rosbags is missing (pip install rosbags)");
-    }
-    ok
+    have_python_modules("python3", &["rosbags"], "pip install rosbags")
 }
 
 /// Every message of a bag as read by `rosbags` (`bridge/tests/read_bag.py`): topic, type, log

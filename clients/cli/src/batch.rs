@@ -20,6 +20,10 @@ bags: the message's index on its topic), so every output can be reproduced with 
 An interrupted run resumes where it stopped: finished sets carry a .done marker and are skipped,
 finished files are kept. OUT/batch.json records what was run.
 
+--shard INDEX/COUNT spreads a batch over machines without a cluster engine: run the same command
+with --shard 0/N .. N-1/N on N machines (same input, output on a shared folder or merged later);
+each writes whole sets, every set is written once.
+
 --lidar-metrics then runs the detector on the clean and the perturbed clouds of this run's LiDAR
 sets and writes the RQ1 table (retention, ATE; see `perturb metrics lidar --help`) to
 OUT/lidar_metrics.md and OUT/lidar_metrics.json, and prints it.")]
@@ -66,6 +70,10 @@ pub struct Args {
     /// write them to OUT/lidar_metrics.md and OUT/lidar_metrics.json.
     #[arg(long, visible_alias = "metrics")]
     pub lidar_metrics: bool,
+    /// Only share INDEX/COUNT of the sets (0-based, e.g. 0/4 .. 3/4): set k of the selection
+    /// goes to shard k mod COUNT, so COUNT machines that each run one shard write every set once.
+    #[arg(long, value_name = "INDEX/COUNT")]
+    pub shard: Option<perturb_study::batch::Shard>,
 }
 
 /// Runs `perturb batch`.
@@ -85,6 +93,7 @@ pub fn run(a: Args) -> Result<()> {
         intensity_max: a.intensity_max,
         topics: a.topic,
         lidar_metrics: a.lidar_metrics,
+        shard: a.shard,
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))

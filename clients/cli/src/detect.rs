@@ -1,7 +1,7 @@
 //! `perturb detect`: the clustering detector on one point-cloud file.
 
 use anyhow::{Context, Result, bail};
-use perturb_core::detector::{Detector, DetectorConfig, ObjectClass};
+use perturb_core::detector::{Detector, DetectorConfig, ObjectClass, points_in_boxes};
 use perturb_core::lidar::{Box3, Points};
 use perturb_study::files::{Loaded, describe_sensor, load, sensor_for};
 use std::path::PathBuf;
@@ -60,49 +60,6 @@ pub struct Detection {
     pub class: ObjectClass,
     /// Points of the scan inside the box.
     pub points: usize,
-}
-
-/// The number of points of `p` inside each box.
-pub fn points_in_boxes(p: &Points, boxes: &[Box3]) -> Vec<usize> {
-    /// A box prepared for the point test: centre, cos and sin of the heading, half sizes, and
-    /// the squared radius of its footprint for a quick rejection.
-    struct Pre {
-        ctr: [f32; 3],
-        c: f32,
-        s: f32,
-        h: [f32; 3],
-        r2: f32,
-    }
-    let pre: Vec<Pre> = boxes
-        .iter()
-        .map(|b| {
-            let (s, c) = b.yaw.sin_cos();
-            let h = [b.size[0] * 0.5, b.size[1] * 0.5, b.size[2] * 0.5];
-            Pre {
-                ctr: b.center,
-                c,
-                s,
-                h,
-                r2: (h[0] * h[0] + h[1] * h[1]) * 1.0001 + 1e-6,
-            }
-        })
-        .collect();
-    let mut counts = vec![0; boxes.len()];
-    for i in 0..p.len() {
-        let (x, y, z) = (p.x[i], p.y[i], p.z[i]);
-        for (k, b) in pre.iter().enumerate() {
-            let (dx, dy, dz) = (x - b.ctr[0], y - b.ctr[1], z - b.ctr[2]);
-            if dx * dx + dy * dy > b.r2 || dz.abs() > b.h[2] {
-                continue;
-            }
-            let lx = dx * b.c + dy * b.s;
-            let ly = dy * b.c - dx * b.s;
-            if lx.abs() <= b.h[0] && ly.abs() <= b.h[1] {
-                counts[k] += 1;
-            }
-        }
-    }
-    counts
 }
 
 /// Runs `perturb detect`.

@@ -150,6 +150,43 @@ pub struct BatchOptions {
     pub topics: Vec<String>,
     /// Afterwards, compute the LiDAR detection metrics of the LiDAR sets.
     pub lidar_metrics: bool,
+    /// Only this share of the sets (to spread a batch over machines without a cluster engine).
+    pub shard: Option<Shard>,
+}
+
+/// Share `index` of `count` of a batch's sets: set k (in catalogue order, severities ascending)
+/// belongs to shard k mod count. Every set is written whole by exactly one shard, so the shards
+/// can write into one shared folder or into folders merged afterwards.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    /// 0-based index, below `count`.
+    pub index: usize,
+    /// Number of shards, at least 1.
+    pub count: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = StudyError;
+    fn from_str(s: &str) -> Result<Self> {
+        let bad = || {
+            StudyError::Config(format!(
+                "--shard `{s}`: expected INDEX/COUNT with 0 <= INDEX < COUNT, e.g. 0/4 .. 3/4"
+            ))
+        };
+        let (i, n) = s.split_once('/').ok_or_else(bad)?;
+        let index: usize = i.trim().parse().map_err(|_| bad())?;
+        let count: usize = n.trim().parse().map_err(|_| bad())?;
+        if count == 0 || index >= count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
 }
 
 /// What a batch run did.
@@ -173,6 +210,8 @@ struct Manifest<'a> {
     sensor: Option<&'a str>,
     forward: Option<&'a str>,
     intensity_max: Option<f32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    shard: Option<String>,
     sets: Vec<String>,
 }
 
@@ -185,15 +224,40 @@ impl Progress for Ticks<'_> {
     }
 }
 
-/// Runs the batch on the current rayon pool: every unfinished set is written, then (optionally)
-/// the LiDAR metrics are computed. Progress counts frames.
-pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome> {
+/// A batch ready to run: the dataset, its sets and which of them are still to do. Made by
+/// [`plan`], which also writes `OUT/batch.json`.
+pub struct Planned {
+    /// The dataset.
+    pub dataset: Dataset,
+    /// Every selected set of this shard (finished now or before).
+    pub sets: Vec<Set>,
+    /// The sets without a `.done` marker.
+    pub todo: Vec<Set>,
+    /// For a folder of point clouds: the sensor model that reads them.
+    pub sensor: Option<SensorModel>,
+}
+
+/// Opens the dataset, selects the sets (of this shard), writes the manifest `OUT/batch.json` and
+/// finds the sets already done. `perturb batch` and the Python package's Ray batch both start
+/// here, so they write the same folder layout and manifest.
+pub fn plan(opts: &BatchOptions, progress: &dyn Progress) -> Result<Planned> {
     let dataset = Dataset::open(&opts.input)?;
     let modalities = match &dataset {
         Dataset::Files { modality, .. } => vec![*modality],
         Dataset::Bag(_) => vec![Modality::Camera, Modality::Lidar],
     };
-    let sets = select(&opts.selection, &modalities, progress)?;
+    let mut sets = select(&opts.selection, &modalities, progress)?;
+    if let Some(shard) = opts.shard {
+        sets = sets
+            .into_iter()
+            .enumerate()
+            .filter(|(k, _)| k % shard.count == shard.index)
+            .map(|(_, s)| s)
+            .collect();
+        if sets.is_empty() {
+            progress.note(&format!("shard {shard}: no set falls to this shard"));
+        }
+    }
     std::fs::create_dir_all(&opts.out).map_err(StudyError::io(&opts.out))?;
     let manifest = Manifest {
         tool: concat!("perturb ", env!("CARGO_PKG_VERSION")),
@@ -202,6 +266,7 @@ pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome>
         sensor: opts.sensor.as_deref(),
         forward: opts.forward.as_deref(),
         intensity_max: opts.intensity_max,
+        shard: opts.shard.map(|s| s.to_string()),
         sets: sets
             .iter()
             .map(|s| format!("{}:{}", s.entry.id, s.severity))
@@ -225,26 +290,52 @@ pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome>
             sets.len()
         ));
     }
-    match &dataset {
+    let sensor = match &dataset {
         Dataset::Files {
-            root,
             files,
-            modality,
+            modality: Modality::Lidar,
+            ..
         } => {
+            let kind = perturb_core::formats::FileKind::from_path(&files[0]).ok();
+            let s = sensor_for(
+                kind,
+                opts.sensor.as_deref(),
+                opts.forward.as_deref(),
+                opts.intensity_max,
+            )?;
+            progress.note(&crate::files::describe_sensor(&s));
+            Some(s)
+        }
+        _ => None,
+    };
+    Ok(Planned {
+        dataset,
+        sets,
+        todo,
+        sensor,
+    })
+}
+
+/// Marks a set of a folder dataset finished (`DIR/.done`, with its number of files): a resumed
+/// batch skips it.
+pub fn mark_done(dir: &Path, files: usize) -> Result<()> {
+    let done = dir.join(".done");
+    std::fs::write(&done, format!("{{\"files\": {files}}}")).map_err(StudyError::io(&done))
+}
+
+/// Runs the batch on the current rayon pool: every unfinished set is written, then (optionally)
+/// the LiDAR metrics are computed. Progress counts frames.
+pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome> {
+    let Planned {
+        dataset,
+        sets,
+        todo,
+        sensor,
+    } = plan(opts, progress)?;
+    let resumed = sets.len() - todo.len();
+    match &dataset {
+        Dataset::Files { root, files, .. } => {
             progress.set_length((todo.len() * files.len()) as u64);
-            let sensor = if *modality == Modality::Lidar {
-                let kind = perturb_core::formats::FileKind::from_path(&files[0]).ok();
-                let s = sensor_for(
-                    kind,
-                    opts.sensor.as_deref(),
-                    opts.forward.as_deref(),
-                    opts.intensity_max,
-                )?;
-                progress.note(&crate::files::describe_sensor(&s));
-                Some(s)
-            } else {
-                None
-            };
             for set in &todo {
                 progress.set_message(&format!("{} s{}", set.entry.id, set.severity));
                 run_files_set(opts, *set, root, files, sensor.as_ref(), progress)?;
@@ -343,6 +434,82 @@ fn lidar_metrics(
     Ok(Some(report))
 }
 
+/// The perturber of one set for the files of a folder dataset, as `perturb batch` runs it on
+/// each worker thread (and the Python package's Ray batch on each actor).
+pub struct FileWorker {
+    set: Set,
+    worker: Worker,
+}
+
+enum Worker {
+    Camera(CameraPerturber),
+    Lidar(Box<LidarPerturber>),
+}
+
+impl FileWorker {
+    /// The perturber of `set` with `seed`; `sensor` reads point clouds (default VLP-32C).
+    pub fn new(set: Set, seed: u64, sensor: Option<&SensorModel>) -> Result<Self> {
+        let spec = Spec::new(set.entry.id, set.severity, seed)?;
+        let worker = match set.entry.modality {
+            Modality::Camera => Worker::Camera(CameraPerturber::from_spec(spec)?),
+            Modality::Lidar => Worker::Lidar(Box::new(LidarPerturber::from_spec(
+                spec,
+                sensor.cloned().unwrap_or_default(),
+            )?)),
+        };
+        Ok(FileWorker { set, worker })
+    }
+
+    /// The set.
+    pub fn set(&self) -> Set {
+        self.set
+    }
+
+    /// Perturbs `root/rel` (frame sequence number `seq`) into `dir/rel` in the input's format,
+    /// unless that file exists already. Returns whether it wrote the file. The file is written
+    /// under a temporary name and renamed, so an interrupted run never leaves a half-written file
+    /// that a resumed run would take as done.
+    pub fn run(&mut self, root: &Path, rel: &Path, dir: &Path, seq: u64) -> Result<bool> {
+        let out = dir.join(rel);
+        if out.exists() {
+            return Ok(false);
+        }
+        if let Some(p) = out.parent() {
+            std::fs::create_dir_all(p).map_err(StudyError::io(p))?;
+        }
+        let input = root.join(rel);
+        let tmp = out.with_file_name(format!(
+            ".{}.partial",
+            rel.file_name().and_then(|n| n.to_str()).unwrap_or("frame")
+        ));
+        let perturbing = || format!("perturbing {}", input.display());
+        match (load(&input)?, &mut self.worker) {
+            (Loaded::Image(img, kind), Worker::Camera(p)) => {
+                let o = p
+                    .apply_owned(&img.view(), seq)
+                    .map_err(StudyError::perturb(perturbing()))?;
+                save_image(&tmp, &o.view(), kind)?;
+            }
+            (Loaded::Cloud(c, kind, meta), Worker::Lidar(p)) => {
+                let o = p
+                    .apply_owned(&c.view(), seq, None)
+                    .map_err(StudyError::perturb(perturbing()))?;
+                save_cloud(&tmp, &o.view(), kind, meta)?;
+            }
+            _ => {
+                return Err(StudyError::input(
+                    &input,
+                    "does not match the perturbation's modality",
+                ));
+            }
+        }
+        std::fs::rename(&tmp, &out).map_err(|e| {
+            StudyError::input(&tmp, format!("cannot rename to {}: {e}", out.display()))
+        })?;
+        Ok(true)
+    }
+}
+
 fn run_files_set(
     opts: &BatchOptions,
     set: Set,
@@ -353,68 +520,23 @@ fn run_files_set(
 ) -> Result<()> {
     let dir = set.dir(&opts.out);
     std::fs::create_dir_all(&dir).map_err(StudyError::io(&dir))?;
-    let spec = Spec::new(set.entry.id, set.severity, opts.seed)?;
-    enum Worker {
-        Camera(CameraPerturber),
-        Lidar(Box<LidarPerturber>),
-    }
-    let make = || -> perturb_core::Result<Worker> {
-        Ok(match set.entry.modality {
-            Modality::Camera => Worker::Camera(CameraPerturber::from_spec(spec)?),
-            Modality::Lidar => Worker::Lidar(Box::new(LidarPerturber::from_spec(
-                spec,
-                sensor.cloned().unwrap_or_default(),
-            )?)),
-        })
-    };
+    // Fails here, with its own error, if the perturbation cannot be built; the workers' copies
+    // below are then built the same way.
+    FileWorker::new(set, opts.seed, sensor)?;
     files
         .par_iter()
         .enumerate()
-        .map_init(make, |worker, (seq, rel)| -> Result<()> {
-            let worker = worker.as_mut().map_err(|e| StudyError::Core(e.clone()))?;
-            let out = dir.join(rel);
-            if out.exists() {
+        .map_init(
+            || FileWorker::new(set, opts.seed, sensor),
+            |worker, (seq, rel)| -> Result<()> {
+                let worker = worker
+                    .as_mut()
+                    .map_err(|e| StudyError::Config(e.to_string()))?;
+                worker.run(root, rel, &dir, seq as u64)?;
                 progress.inc(1);
-                return Ok(());
-            }
-            if let Some(p) = out.parent() {
-                std::fs::create_dir_all(p).map_err(StudyError::io(p))?;
-            }
-            let input = root.join(rel);
-            // Written under a temporary name and renamed, so an interrupted run never leaves a
-            // half-written file that a resumed run would take as done.
-            let tmp = out.with_file_name(format!(
-                ".{}.partial",
-                rel.file_name().and_then(|n| n.to_str()).unwrap_or("frame")
-            ));
-            let perturbing = || format!("perturbing {}", input.display());
-            match (load(&input)?, worker) {
-                (Loaded::Image(img, kind), Worker::Camera(p)) => {
-                    let o = p
-                        .apply_owned(&img.view(), seq as u64)
-                        .map_err(StudyError::perturb(perturbing()))?;
-                    save_image(&tmp, &o.view(), kind)?;
-                }
-                (Loaded::Cloud(c, kind, meta), Worker::Lidar(p)) => {
-                    let o = p
-                        .apply_owned(&c.view(), seq as u64, None)
-                        .map_err(StudyError::perturb(perturbing()))?;
-                    save_cloud(&tmp, &o.view(), kind, meta)?;
-                }
-                _ => {
-                    return Err(StudyError::input(
-                        &input,
-                        "does not match the perturbation's modality",
-                    ));
-                }
-            }
-            std::fs::rename(&tmp, &out).map_err(|e| {
-                StudyError::input(&tmp, format!("cannot rename to {}: {e}", out.display()))
-            })?;
-            progress.inc(1);
-            Ok(())
-        })
+                Ok(())
+            },
+        )
         .collect::<Result<Vec<()>>>()?;
-    let done = dir.join(".done");
-    std::fs::write(&done, format!("{{\"files\": {}}}", files.len())).map_err(StudyError::io(&done))
+    mark_done(&dir, files.len())
 }

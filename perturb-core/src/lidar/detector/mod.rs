@@ -474,6 +474,49 @@ pub fn ground_mask(points: &Points) -> Vec<bool> {
     Detector::new(DetectorConfig::default()).ground_mask(points)
 }
 
+/// The number of points of `p` inside each box (what `perturb detect` reports beside each box).
+pub fn points_in_boxes(p: &Points, boxes: &[Box3]) -> Vec<usize> {
+    /// A box prepared for the point test: centre, cos and sin of the heading, half sizes, and
+    /// the squared radius of its footprint for a quick rejection.
+    struct Pre {
+        ctr: [f32; 3],
+        c: f32,
+        s: f32,
+        h: [f32; 3],
+        r2: f32,
+    }
+    let pre: Vec<Pre> = boxes
+        .iter()
+        .map(|b| {
+            let (s, c) = b.yaw.sin_cos();
+            let h = [b.size[0] * 0.5, b.size[1] * 0.5, b.size[2] * 0.5];
+            Pre {
+                ctr: b.center,
+                c,
+                s,
+                h,
+                r2: (h[0] * h[0] + h[1] * h[1]) * 1.0001 + 1e-6,
+            }
+        })
+        .collect();
+    let mut counts = vec![0; boxes.len()];
+    for i in 0..p.len() {
+        let (x, y, z) = (p.x[i], p.y[i], p.z[i]);
+        for (k, b) in pre.iter().enumerate() {
+            let (dx, dy, dz) = (x - b.ctr[0], y - b.ctr[1], z - b.ctr[2]);
+            if dx * dx + dy * dy > b.r2 || dz.abs() > b.h[2] {
+                continue;
+            }
+            let lx = dx * b.c + dy * b.s;
+            let ly = dy * b.c - dx * b.s;
+            if lx.abs() <= b.h[0] && ly.abs() <= b.h[1] {
+                counts[k] += 1;
+            }
+        }
+    }
+    counts
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
