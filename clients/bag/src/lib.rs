@@ -21,6 +21,7 @@
 //! ```
 
 pub mod events;
+pub mod guard;
 mod read;
 pub mod schema;
 mod write;

@@ -1,6 +1,7 @@
 //! Reading rosbag2 MCAP bags.
 
 use crate::BagError;
+use crate::guard;
 use mcap::sans_io::indexed_reader::{IndexedReadEvent, IndexedReader, IndexedReaderOptions};
 use perturb_core::formats::ros::{CompressedImageMsg, ImageMsg, PointCloud2Msg};
 use std::collections::BTreeMap;
@@ -147,6 +148,86 @@ impl std::fmt::Debug for Bag {
 
 const ROS1_HINT: &str = "this is a ROS 1 recording; convert it to a ROS 2 bag first, e.g. `rosbags-convert --src in.mcap --dst out_dir` (pip install rosbags)";
 
+/// Reads the Header record that follows the magic bytes (its lengths checked first) and returns
+/// the profile.
+fn read_header(map: &[u8], path: &Path) -> Result<String, BagError> {
+    let damaged = |reason: String| BagError::NotMcap {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let rest = &map[8..];
+    if rest.is_empty() {
+        return Err(damaged(
+            "the file ends right after the magic bytes: truncated, no Header record and no message (damaged)"
+                .into(),
+        ));
+    }
+    let records = guard::mcap_records_prefix(rest, 8, map.len() as u64, 1)
+        .map_err(|e| damaged(format!("damaged at the start: {e}")))?;
+    let Some(&(opcode, body, _)) = records.first() else {
+        return Err(damaged("no Header record after the magic bytes".into()));
+    };
+    match mcap::read::parse_record(opcode, body) {
+        Ok(mcap::records::Record::Header(h)) => Ok(h.profile),
+        Ok(_) => Err(damaged(format!(
+            "the first record (opcode 0x{opcode:02x}) is not a Header record"
+        ))),
+        Err(e) => Err(damaged(format!("the Header record is unreadable: {e}"))),
+    }
+}
+
+/// Checks the lengths of every record of the summary section (the footer says where it is) and
+/// of every chunk the summary's index points to, so `mcap::Summary::read` and the indexed reader
+/// only ever see lengths that fit the file. `Ok(())` also for a file without footer or summary
+/// (the summary reader then says what is missing).
+fn check_summary(map: &[u8]) -> Result<(), String> {
+    const FOOTER_RECORD: usize = 9 + 20;
+    let len = map.len();
+    if len < 8 + FOOTER_RECORD + 8 || &map[len - 8..] != mcap::MAGIC {
+        return Ok(());
+    }
+    let footer_at = len - 8 - FOOTER_RECORD;
+    let footer = &map[footer_at..len - 8];
+    if footer[0] != 0x02 || footer[1..9] != 20u64.to_le_bytes() {
+        return Ok(());
+    }
+    let summary_start = u64::from_le_bytes(footer[9..17].try_into().expect("8 bytes"));
+    if summary_start == 0 {
+        return Ok(());
+    }
+    if summary_start < 8 || summary_start > footer_at as u64 {
+        return Err(format!(
+            "the footer puts the summary at byte {summary_start}, outside the file's {footer_at} bytes before the footer"
+        ));
+    }
+    guard::mcap_records(
+        &map[summary_start as usize..footer_at],
+        summary_start,
+        len as u64,
+    )
+    .map(|_| ())
+}
+
+/// Checks that every chunk the summary indexes lies inside the file.
+fn check_chunk_indexes(summary: &mcap::Summary, file_len: u64) -> Result<(), String> {
+    for (i, ci) in summary.chunk_indexes.iter().enumerate() {
+        let end = ci.chunk_start_offset.checked_add(ci.chunk_length);
+        if end.is_none_or(|e| e > file_len) {
+            return Err(format!(
+                "chunk index {i} points at bytes {}..+{} past the end of the file ({file_len} bytes): truncated",
+                ci.chunk_start_offset, ci.chunk_length
+            ));
+        }
+        guard::check_decompressed(
+            &format!("chunk index {i}"),
+            ci.chunk_start_offset,
+            ci.uncompressed_size,
+            file_len,
+        )?;
+    }
+    Ok(())
+}
+
 fn open_file(path: &Path) -> Result<File, BagError> {
     let io = |source| BagError::Io {
         path: path.to_path_buf(),
@@ -163,33 +244,32 @@ fn open_file(path: &Path) -> Result<File, BagError> {
         });
     }
     // The header record names the profile.
-    let mut records = mcap::read::LinearReader::new_with_options(
-        &map,
-        mcap::read::Options::IgnoreEndMagic.into(),
-    )
-    .map_err(|e| BagError::NotMcap {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })?;
-    if let Some(Ok(mcap::records::Record::Header(h))) = records.next()
-        && h.profile == "ros1"
-    {
+    let profile = read_header(&map, path)?;
+    if profile == "ros1" {
         return Err(BagError::UnsupportedProfile {
             path: path.to_path_buf(),
-            profile: h.profile,
+            profile,
             hint: ROS1_HINT,
         });
     }
-    let (summary, summary_error) = match mcap::Summary::read(&map) {
+    let file_len = map.len() as u64;
+    let summary = check_summary(&map).and_then(|()| {
+        mcap::Summary::read(&map).map_err(|e| format!("the summary is unreadable ({e})"))
+    });
+    let (summary, summary_error) = match summary {
         Ok(Some(s))
             if !s.chunk_indexes.is_empty()
                 || s.stats.as_ref().is_some_and(|st| st.message_count == 0) =>
         {
-            (Some(s), None)
+            match check_chunk_indexes(&s, file_len) {
+                Ok(()) => (Some(s), None),
+                Err(e) => (None, Some(format!("the summary is unusable: {e}"))),
+            }
         }
         Ok(Some(_)) => (None, Some("the summary has no chunk index".to_string())),
         Ok(None) => (None, Some("the file has no summary section".to_string())),
-        Err(e) => (None, Some(format!("the summary is unreadable ({e})"))),
+        Err(e) if e.starts_with("the summary") => (None, Some(e)),
+        Err(e) => (None, Some(format!("the summary is damaged: {e}"))),
     };
     Ok(File {
         path: path.to_path_buf(),
@@ -280,21 +360,11 @@ impl Bag {
                 None => {
                     let mut counts: BTreeMap<String, (Arc<mcap::Channel<'static>>, u64)> =
                         BTreeMap::new();
-                    let stream = mcap::MessageStream::new_with_options(
-                        &f.map,
-                        mcap::read::Options::IgnoreEndMagic.into(),
-                    )
-                    .map_err(|e| BagError::NotMcap {
-                        path: f.path.clone(),
-                        reason: e.to_string(),
+                    // Damage ends the count; reading the bag reports it.
+                    let _ = scan_linear(f, |ch, _, _| {
+                        counts.entry(ch.topic.clone()).or_insert((ch.clone(), 0)).1 += 1;
+                        Ok(ControlFlow::Continue(()))
                     })?;
-                    for m in stream {
-                        let Ok(m) = m else { break };
-                        counts
-                            .entry(m.channel.topic.clone())
-                            .or_insert((m.channel.clone(), 0))
-                            .1 += 1;
-                    }
                     for (_, (ch, n)) in counts {
                         add(&ch, Some(n));
                     }
@@ -344,7 +414,10 @@ fn read_indexed<F>(
 where
     F: FnMut(BagMessage<'_>) -> Result<ControlFlow<()>, BagError>,
 {
-    let mut opts = IndexedReaderOptions::new();
+    let file_len = file.map.len() as u64;
+    let mut opts = IndexedReaderOptions::new().with_record_length_limit(
+        usize::try_from(guard::decompressed_bound(file_len)).unwrap_or(usize::MAX),
+    );
     if !filter.topics.is_empty() {
         opts = opts.include_topics(filter.topics.clone());
     }
@@ -369,15 +442,17 @@ where
         };
         match event {
             IndexedReadEvent::ReadChunkRequest { offset, length } => {
-                let (start, end) = (offset as usize, offset as usize + length);
-                if end > file.map.len() {
+                let start = offset as usize;
+                let Some(end) = start.checked_add(length).filter(|&e| e <= file.map.len()) else {
                     report.damage = Some(format!(
                         "{}: chunk at byte {start} ({length} bytes) runs past the end of the file ({} bytes): truncated",
                         file.path.display(),
                         file.map.len()
                     ));
                     return Ok(ControlFlow::Continue(()));
-                }
+                };
+                // The compressed records of a chunk; its sizes were checked against the file
+                // and the decompressed bound when the bag was opened.
                 if let Err(e) = reader.insert_chunk_record_data(offset, &file.map[start..end]) {
                     report.damage = Some(format!(
                         "{}: chunk at byte {start}: {e}",
@@ -415,6 +490,99 @@ where
     Ok(ControlFlow::Continue(()))
 }
 
+/// Reads a file record by record in file order (no index needed), checking every length before
+/// the `mcap` crate parses a record, and calls `on_message` for each message with its channel.
+/// Returns how the callback left the read and the damage found, if any: an unreadable record, or
+/// a file that ends without its Data End record (a recording that was cut short).
+fn scan_linear<F>(
+    file: &File,
+    mut on_message: F,
+) -> Result<(ControlFlow<()>, Option<String>), BagError>
+where
+    F: FnMut(
+        &Arc<mcap::Channel<'static>>,
+        &mcap::records::MessageHeader,
+        &[u8],
+    ) -> Result<ControlFlow<()>, BagError>,
+{
+    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    let map: &[u8] = &file.map;
+    let file_len = map.len() as u64;
+    let limit = usize::try_from(guard::decompressed_bound(file_len)).unwrap_or(usize::MAX);
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_skip_end_magic(true)
+            .with_record_length_limit(limit),
+    );
+    let mut channels = mcap::read::ChannelAccumulator::default();
+    let mut fed = 0usize;
+    let mut ended = false;
+    while let Some(event) = reader.next_event() {
+        // Where the reader is in the file (records inside a chunk report the chunk's end).
+        let near = fed as u64;
+        let record = match event {
+            Ok(LinearReadEvent::ReadRequest(n)) => {
+                let n = n.min(map.len() - fed);
+                reader.insert(n).copy_from_slice(&map[fed..fed + n]);
+                reader.notify_read(n);
+                fed += n;
+                continue;
+            }
+            Ok(LinearReadEvent::Record { data, opcode }) => {
+                guard::check_mcap_record(opcode, data, near, file_len)
+                    .map_err(|e| {
+                        e.replace(&format!("at byte {near}"), &format!("near byte {near}"))
+                    })
+                    .and_then(|()| {
+                        mcap::read::parse_record(opcode, data)
+                            .map_err(|e| format!("record 0x{opcode:02x} near byte {near}: {e}"))
+                    })
+            }
+            Err(e) => Err(format!("near byte {near}: {e}")),
+        };
+        let record = match record {
+            Ok(r) => r,
+            Err(e) => return Ok((ControlFlow::Continue(()), Some(e))),
+        };
+        use mcap::records::Record;
+        let added = match record {
+            Record::Schema { header, data } => channels.add_schema_from_slice(header, &data),
+            Record::Channel(c) => channels.add_channel(c),
+            Record::Message { header, data } => {
+                let Some(ch) = channels.get(header.channel_id) else {
+                    return Ok((
+                        ControlFlow::Continue(()),
+                        Some(format!(
+                            "near byte {near}: message on channel {} that no Channel record defined",
+                            header.channel_id
+                        )),
+                    ));
+                };
+                if on_message(&ch, &header, &data)?.is_break() {
+                    return Ok((ControlFlow::Break(()), None));
+                }
+                Ok(())
+            }
+            // The data section ends here: what follows is the summary, read separately.
+            Record::DataEnd(_) | Record::Footer(_) => {
+                ended = true;
+                break;
+            }
+            _ => Ok(()),
+        };
+        if let Err(e) = added {
+            return Ok((
+                ControlFlow::Continue(()),
+                Some(format!("near byte {near}: {e}")),
+            ));
+        }
+    }
+    let damage = (!ended).then(|| {
+        format!("the file ends at byte {file_len} without its Data End record and footer: truncated (a recording that was cut short?)")
+    });
+    Ok((ControlFlow::Continue(()), damage))
+}
+
 fn read_linear<F>(
     file: &File,
     filter: &Filter,
@@ -424,51 +592,40 @@ fn read_linear<F>(
 where
     F: FnMut(BagMessage<'_>) -> Result<ControlFlow<()>, BagError>,
 {
-    let stream = mcap::MessageStream::new_with_options(
-        &file.map,
-        mcap::read::Options::IgnoreEndMagic.into(),
-    )
-    .map_err(|e| BagError::NotMcap {
-        path: file.path.clone(),
-        reason: e.to_string(),
-    })?;
-    for m in stream {
-        let m = match m {
-            Ok(m) => m,
-            Err(e) => {
-                report.damage = Some(format!(
-                    "{}: {} ({}; read in file order because {})",
-                    file.path.display(),
-                    e,
-                    if report.delivered == 0 {
-                        "no message before it"
-                    } else {
-                        "messages before it were read"
-                    },
-                    file.summary_error
-                        .as_deref()
-                        .unwrap_or("the index is unusable")
-                ));
-                return Ok(ControlFlow::Continue(()));
-            }
-        };
-        if !filter.accepts(&m.channel.topic, m.log_time) {
-            continue;
+    let (flow, damage) = scan_linear(file, |ch, header, data| {
+        if !filter.accepts(&ch.topic, header.log_time) {
+            return Ok(ControlFlow::Continue(()));
         }
-        let type_name = m.channel.schema.as_ref().map_or("", |s| s.name.as_str());
+        let type_name = ch.schema.as_ref().map_or("", |s| s.name.as_str());
         report.delivered += 1;
-        let flow = f(BagMessage {
-            topic: &m.channel.topic,
+        f(BagMessage {
+            topic: &ch.topic,
             type_name,
-            log_time: m.log_time,
-            publish_time: m.publish_time,
-            sequence: m.sequence,
-            data: &m.data,
+            log_time: header.log_time,
+            publish_time: header.publish_time,
+            sequence: header.sequence,
+            data,
             path: &file.path,
-        })?;
-        if flow.is_break() {
-            return Ok(flow);
-        }
+        })
+    })?;
+    if flow.is_break() {
+        return Ok(flow);
+    }
+    if let Some(e) = damage {
+        report.damage = Some(format!(
+            "{}: {} ({}; read in file order because {})",
+            file.path.display(),
+            e,
+            if report.delivered == 0 {
+                "no message before it"
+            } else {
+                "messages before it were read"
+            },
+            file.summary_error
+                .as_deref()
+                .unwrap_or("the index is unusable")
+        ));
+        return Ok(ControlFlow::Continue(()));
     }
     if let Some(why) = &file.summary_error {
         report.notes.push(format!(

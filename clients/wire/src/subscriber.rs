@@ -24,6 +24,18 @@ type FramePorts = (Subscriber<Ipc, [u8], FrameHeader>, Listener<Ipc>);
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Origin(u128);
 
+impl Origin {
+    /// The publisher's iceoryx2 id as a number (to store it, e.g. across a restart).
+    pub fn raw(self) -> u128 {
+        self.0
+    }
+
+    /// An origin from [`Origin::raw`].
+    pub fn from_raw(raw: u128) -> Self {
+        Origin(raw)
+    }
+}
+
 /// A received frame: the shared-memory sample, read in place. Dropping it hands the memory back
 /// to the publisher. Frames may be sent to another thread.
 pub struct Frame {
