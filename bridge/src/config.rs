@@ -204,6 +204,9 @@ pub struct RecordSection {
     /// Stop after this many perturbed (or, when only raw is recorded, raw) frames per stream.
     #[serde(default)]
     pub max_frames: Option<u64>,
+    /// Stop after this many seconds of recording.
+    #[serde(default)]
+    pub seconds: Option<f64>,
 }
 
 /// `[[synthetic.camera]]`.
@@ -579,6 +582,14 @@ impl Config {
                 return Err(err(
                     "record.raw".into(),
                     "both `raw` and `perturbed` are false: nothing to record".into(),
+                ));
+            }
+            if let Some(t) = r.seconds
+                && !(t > 0.0 && t.is_finite())
+            {
+                return Err(err(
+                    "record.seconds".into(),
+                    format!("{t} must be a positive number of seconds"),
                 ));
             }
             if let Some(c) = &r.compression {

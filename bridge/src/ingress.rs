@@ -111,6 +111,7 @@ impl Adapter for Ingress {
                 log_bad(&name, rep.failed, &e);
             }
         }
+        rep.undelivered = publisher.undelivered();
         Ok(rep)
     }
 }

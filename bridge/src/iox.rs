@@ -88,6 +88,7 @@ impl Bus for IoxBus {
         Ok(Box::new(IoxPublisher {
             publisher: Some(publisher),
             retired: self.retired.clone(),
+            undelivered: 0,
         }))
     }
 
@@ -118,6 +119,7 @@ impl Bus for IoxBus {
 struct IoxPublisher {
     publisher: Option<FramePublisher>,
     retired: Arc<Mutex<Vec<FramePublisher>>>,
+    undelivered: u64,
 }
 
 impl Drop for IoxPublisher {
@@ -180,10 +182,25 @@ impl BusPublisher for IoxPublisher {
         let Some(publisher) = self.publisher.as_mut() else {
             anyhow::bail!("publisher already retired");
         };
-        publisher
+        let reached = publisher
             .publish_raw(header, payload.data())
             .with_context(|| format!("publishing frame {}", meta.seq))?;
+        if reached == 0 {
+            self.undelivered += 1;
+            if self.undelivered == 1 || self.undelivered.is_multiple_of(100) {
+                warn!(
+                    service = publisher.service(),
+                    seq = meta.seq,
+                    undelivered = self.undelivered,
+                    "no reader (perturbd) on the stream: frame lost"
+                );
+            }
+        }
         Ok(())
+    }
+
+    fn undelivered(&self) -> u64 {
+        self.undelivered
     }
 }
 

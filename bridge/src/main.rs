@@ -85,9 +85,12 @@ enum Command {
         /// Only the perturbed side (and the events).
         #[arg(long)]
         perturbed_only: bool,
-        /// Stop after this many frames per stream.
+        /// Stop after this many frames per stream (default: until SIGINT/SIGTERM).
         #[arg(long)]
         max_frames: Option<u64>,
+        /// Stop after this many seconds (default: until SIGINT/SIGTERM).
+        #[arg(long)]
+        seconds: Option<f64>,
         /// Bus.
         #[arg(long, default_value = "iceoryx2")]
         bus: String,
@@ -200,6 +203,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
                     perturbed: cfg.bridge.bus == BusKind::Iceoryx2,
                     compression: None,
                     max_frames: None,
+                    seconds: None,
                 });
             }
         }
@@ -209,6 +213,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
             raw_only,
             perturbed_only,
             max_frames,
+            seconds,
             bus,
         } => {
             cfg.bridge.bus = bus_kind(bus)?;
@@ -232,6 +237,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
                 perturbed: !raw_only,
                 compression: None,
                 max_frames: *max_frames,
+                seconds: *seconds,
             });
         }
         Command::Synthetic {
@@ -298,8 +304,10 @@ fn real_main(cli: Cli) -> Result<()> {
     run::install_signal_handlers();
     let plan = run::plan(&cfg)?;
     let bus = run::make_bus(&cfg)?;
-    let reports = run::run(plan, bus, Duration::from_secs_f64(cli.linger.max(0.0)))?;
+    let outcome = run::run(plan, bus, Duration::from_secs_f64(cli.linger.max(0.0)))?;
+    let reports = outcome.reports;
     run::print_reports(&reports);
+    println!("stopped: {}", outcome.stopped_by);
     if let Some(path) = &cfg.bridge.report {
         std::fs::write(path, serde_json::to_string_pretty(&reports)?)
             .with_context(|| format!("cannot write the report {}", path.display()))?;

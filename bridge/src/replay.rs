@@ -270,12 +270,13 @@ impl Adapter for ReplayAdapter {
             pubs.insert(stream.clone(), bus.publisher(stream, *kind, Side::Raw)?);
         }
         ctl.ready();
-        let rep = self.0.run(&ctl, &name, &mut |stream, meta, payload| {
+        let mut rep = self.0.run(&ctl, &name, &mut |stream, meta, payload| {
             let p = pubs
                 .get_mut(stream)
                 .context("replay route without publisher")?;
             p.publish(meta, payload)
         })?;
+        rep.undelivered = pubs.values().map(|p| p.undelivered()).sum();
         Ok(rep)
     }
 }

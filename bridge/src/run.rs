@@ -1,6 +1,9 @@
 //! Builds the adapters a configuration asks for and runs them, one thread each: sinks first
-//! (so no early frame is missed), then sources; stops on SIGINT/SIGTERM, when every finite source
-//! is done (after `linger`), or when the recorder has its `max_frames`.
+//! (so no early frame is missed), then sources. It stops on SIGINT/SIGTERM; when this process has
+//! sources, all finite, and they are done (after `linger`, for the last frames to come through the
+//! daemon); when every sink is done (a recorder's `max_frames` or `seconds`); or when an adapter
+//! fails. A bridge without sources of its own (record or egress only) runs until one of the
+//! others: it never stops because nothing arrives. It always says why it stopped.
 
 use crate::adapter::{Adapter, Control};
 use crate::bus::{Bus, Side};
@@ -138,9 +141,20 @@ pub fn install_signal_handlers() {
     }
 }
 
-/// Runs a plan on `bus` until stopped; returns every adapter's report.
-pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<AdapterReport>> {
+/// What a run did and why it ended.
+#[derive(Debug)]
+pub struct Outcome {
+    /// Every adapter's report.
+    pub reports: Vec<AdapterReport>,
+    /// Why the bridge stopped.
+    pub stopped_by: String,
+}
+
+/// Runs a plan on `bus` until stopped; returns every adapter's report and why it stopped.
+pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
     let stop = Arc::new(AtomicBool::new(false));
+    let why: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
+    let has_sources = !plan.sources.is_empty();
     let mut handles = Vec::new();
     let spawn =
         |a: Box<dyn Adapter>,
@@ -149,7 +163,7 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
          -> Result<()> {
             let name = a.name();
             let sink = a.is_sink();
-            let ctl = Control::new(stop.clone(), Some(ready));
+            let ctl = Control::new(stop.clone(), Some(ready)).with_reason(why.clone());
             let bus = bus.clone();
             let h = std::thread::Builder::new()
                 .name(name.chars().take(15).collect())
@@ -158,7 +172,7 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
                     let r = a.run(bus.as_ref(), ctl);
                     if let Err(e) = &r {
                         tracing::error!("{e:#}");
-                        stopper.stop_all();
+                        stopper.stop_because(format!("an adapter failed: {e:#}"));
                     }
                     r
                 })?;
@@ -197,9 +211,14 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
     wait_ready(rx, n_sources);
     tracing::info!("bridge running on the {} bus", bus.name());
     let mut sources_done_at: Option<Instant> = None;
+    let set_why = |w: String| {
+        if let Ok(mut g) = why.lock() {
+            g.get_or_insert(w);
+        }
+    };
     loop {
         if SIGNALLED.load(Ordering::SeqCst) {
-            tracing::info!("signal received: stopping");
+            set_why("SIGINT/SIGTERM".into());
             stop.store(true, Ordering::SeqCst);
         }
         if stop.load(Ordering::SeqCst) {
@@ -207,15 +226,30 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
         }
         let sources_left = handles.iter().any(|(_, sink, h)| !sink && !h.is_finished());
         let sinks_left = handles.iter().any(|(_, sink, h)| *sink && !h.is_finished());
-        if !plan.endless && !sources_left {
+        if has_sources && !plan.endless && !sources_left {
             let t = *sources_done_at.get_or_insert_with(Instant::now);
             if !sinks_left || t.elapsed() >= linger {
+                set_why(format!(
+                    "every source finished (the sinks had {:.1} s for the last frames)",
+                    linger.as_secs_f64()
+                ));
                 stop.store(true, Ordering::SeqCst);
                 break;
             }
         }
+        if !sinks_left && !sources_left {
+            set_why("every adapter finished".into());
+            stop.store(true, Ordering::SeqCst);
+            break;
+        }
         std::thread::sleep(Duration::from_millis(20));
     }
+    let stopped_by = why
+        .lock()
+        .ok()
+        .and_then(|g| g.clone())
+        .unwrap_or_else(|| "stopped".into());
+    tracing::info!("stopping: {stopped_by}");
     let mut reports = Vec::new();
     let mut first_err = None;
     for (name, _, h) in handles {
@@ -231,7 +265,10 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
     }
     match first_err {
         Some(e) => Err(e),
-        None => Ok(reports),
+        None => Ok(Outcome {
+            reports,
+            stopped_by,
+        }),
     }
 }
 
@@ -261,6 +298,12 @@ pub fn print_reports(reports: &[AdapterReport]) {
         );
         for d in &r.damage {
             println!("    damage: {d}");
+        }
+        if r.undelivered > 0 {
+            println!(
+                "    note: {} frame(s) published while no reader (perturbd) was connected: lost",
+                r.undelivered
+            );
         }
         for n in &r.notes {
             println!("    note: {n}");

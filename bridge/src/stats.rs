@@ -135,6 +135,10 @@ pub struct AdapterReport {
     pub skipped: u64,
     /// Frames lost (e.g. a DDS write that failed).
     pub failed: u64,
+    /// Sources: frames published while no reader was connected (no `perturbd` on the stream, or
+    /// it was restarting); the daemon counts them as `dropped_upstream` once it is back.
+    #[serde(default)]
+    pub undelivered: u64,
     /// Damage found (bags).
     pub damage: Vec<String>,
     /// Notes.

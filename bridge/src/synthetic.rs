@@ -181,6 +181,7 @@ impl Adapter for Synthetic {
             }
             seq += 1;
         }
+        rep.undelivered = publisher.undelivered();
         Ok(rep)
     }
 }

@@ -292,3 +292,61 @@ fn example_configs_are_valid() {
     }
     assert!(n >= 3);
 }
+
+#[test]
+fn a_recorder_without_a_source_of_its_own_runs_until_stopped_and_says_why() {
+    let dir = scratch("record-only");
+    let mut child = Command::new(bridge_exe())
+        .args([
+            "record",
+            "--bus",
+            "local",
+            "--stream",
+            "camera_front=image",
+            "--out",
+        ])
+        .arg(dir.join("rec"))
+        .args(["--max-frames", "100"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Nothing feeds the stream in this process: the sources are other processes that may start
+    // later. The recorder must wait for them (it used to stop after the 2 s linger).
+    std::thread::sleep(std::time::Duration::from_secs(4));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the recorder stopped on its own without a frame"
+    );
+    let st = interrupt(&mut child, std::time::Duration::from_secs(10)).expect("stops on SIGINT");
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        st.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("stopped: SIGINT/SIGTERM"), "{stdout}");
+
+    // With --seconds it stops by itself, and says so.
+    let out = Command::new(bridge_exe())
+        .args([
+            "record",
+            "--bus",
+            "local",
+            "--stream",
+            "camera_front=image",
+            "--out",
+        ])
+        .arg(dir.join("rec2"))
+        .args(["--seconds", "1"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("recorded for the 1 s asked for"),
+        "{stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

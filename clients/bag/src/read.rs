@@ -123,9 +123,25 @@ pub struct ReadReport {
     pub notes: Vec<String>,
 }
 
+/// A file's bytes: memory-mapped, or in memory ([`Bag::from_bytes`]).
+enum Bytes {
+    Map(memmap2::Mmap),
+    Owned(Vec<u8>),
+}
+
+impl std::ops::Deref for Bytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            Bytes::Map(m) => m,
+            Bytes::Owned(v) => v,
+        }
+    }
+}
+
 struct File {
     path: PathBuf,
-    map: memmap2::Mmap,
+    map: Bytes,
     summary: Option<mcap::Summary>,
     summary_error: Option<String>,
 }
@@ -237,6 +253,11 @@ fn open_file(path: &Path) -> Result<File, BagError> {
     // SAFETY: the map is read-only and the bag is not expected to change while it is read; a
     // concurrent truncation by another process would be a user error this crate cannot prevent.
     let map = unsafe { memmap2::Mmap::map(&f) }.map_err(io)?;
+    file_from_bytes(path, Bytes::Map(map))
+}
+
+/// Checks a file's bytes and reads its header and summary.
+fn file_from_bytes(path: &Path, map: Bytes) -> Result<File, BagError> {
     if map.len() < 8 || &map[..8] != mcap::MAGIC {
         return Err(BagError::NotMcap {
             path: path.to_path_buf(),
@@ -308,6 +329,13 @@ impl Bag {
             .map(|p| open_file(p))
             .collect::<Result<_, _>>()?;
         Ok(Bag { files })
+    }
+
+    /// A one-file bag held in memory; `name` stands for its path in messages.
+    pub fn from_bytes(name: &Path, bytes: Vec<u8>) -> Result<Bag, BagError> {
+        Ok(Bag {
+            files: vec![file_from_bytes(name, Bytes::Owned(bytes))?],
+        })
     }
 
     /// The files of the bag.
