@@ -412,6 +412,15 @@ impl Config {
             problem,
         };
         let check_stream = |key: String, s: &str| -> Result<(), ConfigError> {
+            let path_like = s.split('/').any(|part| part == "." || part == "..");
+            if path_like {
+                return Err(err(
+                    key,
+                    format!(
+                        "stream name `{s}` contains `.` or `..` segments: a stream name is not a path"
+                    ),
+                ));
+            }
             if s.is_empty() || s.len() > 200 || s.starts_with('/') || s.contains("//") {
                 return Err(err(
                     key,
@@ -575,8 +584,17 @@ impl Config {
             if r.streams.is_empty() {
                 return Err(err("record.streams".into(), "is empty".into()));
             }
+            let mut seen = BTreeSet::new();
             for (i, s) in r.streams.iter().enumerate() {
                 check_stream(format!("record.streams[{i}]"), s)?;
+                if !seen.insert(s) {
+                    return Err(err(
+                        format!("record.streams[{i}]"),
+                        format!(
+                            "stream `{s}` is listed twice (every frame would be recorded twice)"
+                        ),
+                    ));
+                }
             }
             if !r.raw && !r.perturbed {
                 return Err(err(
@@ -671,6 +689,12 @@ streams = ["camera_front", "lidar_top"]
         assert!(e.problem.contains("video"), "{e}");
         let e = parse("").unwrap_err();
         assert!(e.problem.contains("no adapter"), "{e}");
+        let e = parse("[record]\nout = \"x\"\nstreams = [\"a\", \"a\"]\n").unwrap_err();
+        assert_eq!(e.key, "record.streams[1]");
+        assert!(e.problem.contains("twice"), "{e}");
+        let e = parse("[record]\nout = \"x\"\nstreams = [\"../../etc\"]\n").unwrap_err();
+        assert_eq!(e.key, "record.streams[0]");
+        assert!(e.problem.contains("not a path"), "{e}");
         let e = parse("[record]\nout = \"x\"\nstreams = [\"a\"]\ncompression = \"gzip\"\n")
             .unwrap_err();
         assert_eq!(e.key, "record.compression");

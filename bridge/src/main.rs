@@ -298,6 +298,8 @@ fn main() {
 fn real_main(cli: Cli) -> Result<()> {
     let cfg = config_of(&cli)?;
     if cli.check {
+        // What the run resolves before it starts: the replay bag and its topics, stream kinds.
+        run::resolve(&cfg)?;
         println!("configuration OK");
         return Ok(());
     }

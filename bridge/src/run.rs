@@ -32,25 +32,71 @@ pub struct Plan {
     pub endless: bool,
 }
 
+/// What a configuration resolves to before anything runs: the replay (its bag opened and its
+/// topics matched) and the kind of every stream. `--check` stops here; [`plan`] goes on.
+pub struct Resolved {
+    /// The opened replay.
+    pub replay: Option<Replay>,
+    /// Stream -> kind, from every source, `[streams]` and explicit egress kinds.
+    pub kinds: BTreeMap<String, StreamKind>,
+}
+
+/// Opens the replay bag and works out every stream's kind; errors name the key: a bag that is
+/// missing, unreadable or lacks the named topics, an egress `kind` that contradicts what the
+/// stream carries, a recorded stream nothing says the kind of.
+pub fn resolve(cfg: &Config) -> Result<Resolved> {
+    let mut kinds: BTreeMap<String, StreamKind> = cfg.source_kinds();
+    let replay = match &cfg.replay {
+        Some(r) => {
+            let replay = Replay::open(r.clone())
+                .with_context(|| format!("replay.bag `{}`", r.bag.display()))?;
+            for (stream, kind) in replay.routes.values() {
+                kinds.insert(stream.clone(), *kind);
+            }
+            Some(replay)
+        }
+        None => None,
+    };
+    for (i, e) in cfg.egress.iter().enumerate() {
+        let Some(k) = e.kind else { continue };
+        match kinds.get(&e.stream) {
+            Some(&have) if have != k => anyhow::bail!(
+                "egress[{i}].kind: `{}` says stream `{}` carries {}, but its source publishes {}",
+                match k {
+                    StreamKind::Image => "image",
+                    StreamKind::Cloud => "cloud",
+                },
+                e.stream,
+                k.ros_type(),
+                have.ros_type()
+            ),
+            Some(_) => {}
+            None => {
+                kinds.insert(e.stream.clone(), k);
+            }
+        }
+    }
+    if let Some(r) = &cfg.record {
+        for (i, s) in r.streams.iter().enumerate() {
+            if !kinds.contains_key(s) {
+                anyhow::bail!(
+                    "record.streams[{i}]: nothing says what stream `{s}` carries: add it to [streams] (`{s} = \"image\"` or `\"cloud\"`)"
+                );
+            }
+        }
+    }
+    Ok(Resolved { replay, kinds })
+}
+
 /// Builds the adapters (opens bags and DDS participants; errors name what failed).
 pub fn plan(cfg: &Config) -> Result<Plan> {
-    let mut kinds: BTreeMap<String, StreamKind> = cfg.source_kinds();
+    let Resolved { replay, kinds } = resolve(cfg)?;
     let mut sources: Vec<Box<dyn Adapter>> = Vec::new();
     let mut sinks: Vec<Box<dyn Adapter>> = Vec::new();
     let mut endless = false;
-    if let Some(r) = &cfg.replay {
-        let replay =
-            Replay::open(r.clone()).with_context(|| format!("replay.bag `{}`", r.bag.display()))?;
-        for (stream, kind) in replay.routes.values() {
-            kinds.insert(stream.clone(), *kind);
-        }
-        endless |= r.looped;
+    if let Some(replay) = replay {
+        endless |= replay.cfg.looped;
         sources.push(Box::new(ReplayAdapter(replay)));
-    }
-    for e in &cfg.egress {
-        if let Some(k) = e.kind {
-            kinds.entry(e.stream.clone()).or_insert(k);
-        }
     }
     if !cfg.ingress.is_empty() {
         let dds: Arc<dyn DdsBackend> = Arc::from(

@@ -350,3 +350,50 @@ fn a_recorder_without_a_source_of_its_own_runs_until_stopped_and_says_why() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn check_resolves_what_the_run_would_resolve() {
+    let dir = scratch("check-resolves");
+    std::fs::create_dir_all(&dir).unwrap();
+    let check = |name: &str, text: &str| {
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        let o = Command::new(bridge_exe())
+            .arg("--config")
+            .arg(&p)
+            .arg("--check")
+            .output()
+            .unwrap();
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).to_string(),
+        )
+    };
+    let (ok, err) = check(
+        "missing.toml",
+        "[bridge]\nbus = \"local\"\n[replay]\nbag = \"no_such.mcap\"\n",
+    );
+    assert!(
+        !ok && err.contains("replay.bag") && err.contains("no_such.mcap"),
+        "{err}"
+    );
+    let (ok, err) = check(
+        "kind.toml",
+        "[bridge]\nbus = \"local\"\n[dds]\ninterfaces = [\"lo\"]\n\
+         [[synthetic.camera]]\nstream = \"cam\"\nwidth = 64\nheight = 48\n\
+         [[egress]]\nstream = \"cam\"\ntopic = \"/cam\"\nkind = \"cloud\"\n",
+    );
+    assert!(
+        !ok && err.contains("egress[0].kind") && err.contains("cam"),
+        "{err}"
+    );
+    let (ok, err) = check(
+        "record.toml",
+        "[bridge]\nbus = \"local\"\n[record]\nout = \"rec\"\nstreams = [\"nobody\"]\n",
+    );
+    assert!(
+        !ok && err.contains("record.streams[0]") && err.contains("nobody"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -48,7 +48,7 @@ enum Command {
         /// Perturbation ID or name (see `perturb list`).
         id: String,
         /// Severity: 1..5 for camera, 1..3 for LiDAR perturbations.
-        #[arg(long)]
+        #[arg(long, value_parser = clap::value_parser!(u8).range(1..=5))]
         severity: u8,
         /// Seed (default: the stream's current seed).
         #[arg(long)]
