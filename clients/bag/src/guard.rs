@@ -291,6 +291,28 @@ pub fn mcap_records(region: &[u8], base: u64, file_len: u64) -> Result<Vec<RawRe
     mcap_records_prefix(region, base, file_len, usize::MAX)
 }
 
+/// The whole records at the start of `region` (each checked as in [`mcap_records`]) and what
+/// stopped the walk, if it did not reach the end: for salvaging a truncated chunk.
+pub fn mcap_records_salvage(
+    region: &[u8],
+    base: u64,
+    file_len: u64,
+) -> (Vec<RawRecord<'_>>, Option<String>) {
+    let mut out = Vec::new();
+    let mut pos = 0usize;
+    while pos < region.len() {
+        match mcap_records_prefix(&region[pos..], base + pos as u64, file_len, 1) {
+            Ok(r) => {
+                let (op, body, at) = r[0];
+                out.push((op, body, at));
+                pos += 9 + body.len();
+            }
+            Err(e) => return (out, Some(e)),
+        }
+    }
+    (out, None)
+}
+
 /// [`mcap_records`] for the first `max` records of `region` only (the rest is not looked at).
 pub fn mcap_records_prefix(
     region: &[u8],

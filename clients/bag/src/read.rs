@@ -518,10 +518,51 @@ where
     Ok(ControlFlow::Continue(()))
 }
 
+/// The records of a chunk, decompressed here (not by the `mcap` crate, so every inner length
+/// goes through the guard too): `body` is the Chunk record's body, checked by
+/// [`guard::check_mcap_record`] (its compressed size fits, its decompressed size is bounded).
+fn chunk_records(body: &[u8], at: u64, file_len: u64) -> Result<Vec<u8>, String> {
+    let Ok(mcap::records::Record::Chunk { header, data }) = mcap::read::parse_record(0x06, body)
+    else {
+        return Err(format!("Chunk record at byte {at} is unreadable"));
+    };
+    let size = usize::try_from(header.uncompressed_size)
+        .map_err(|_| format!("Chunk record at byte {at}: size not addressable"))?;
+    let out = match header.compression.as_str() {
+        "" => data.to_vec(),
+        "zstd" => zstd::bulk::decompress(&data, size)
+            .map_err(|e| format!("Chunk record at byte {at}: zstd: {e}"))?,
+        "lz4" => {
+            use std::io::Read;
+            let mut out = Vec::new();
+            lz4::Decoder::new(&data[..])
+                .map_err(|e| format!("Chunk record at byte {at}: lz4: {e}"))?
+                .take(size as u64 + 1)
+                .read_to_end(&mut out)
+                .map_err(|e| format!("Chunk record at byte {at}: lz4: {e}"))?;
+            out
+        }
+        other => {
+            return Err(format!(
+                "Chunk record at byte {at}: compression `{other}` is not supported (zstd, lz4, none)"
+            ));
+        }
+    };
+    if out.len() != size {
+        return Err(format!(
+            "Chunk record at byte {at} holds {} bytes once decompressed, its header says {size}",
+            out.len()
+        ));
+    }
+    let _ = file_len;
+    Ok(out)
+}
+
 /// Reads a file record by record in file order (no index needed), checking every length before
-/// the `mcap` crate parses a record, and calls `on_message` for each message with its channel.
-/// Returns how the callback left the read and the damage found, if any: an unreadable record, or
-/// a file that ends without its Data End record (a recording that was cut short).
+/// the `mcap` crate parses a record (chunks are unpacked here, their records checked the same
+/// way), and calls `on_message` for each message with its channel. Returns how the callback left
+/// the read and the damage found, if any: an unreadable record, or a file that ends without its
+/// Data End record (a recording that was cut short).
 fn scan_linear<F>(
     file: &File,
     mut on_message: F,
@@ -533,76 +574,147 @@ where
         &[u8],
     ) -> Result<ControlFlow<()>, BagError>,
 {
-    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
     let map: &[u8] = &file.map;
     let file_len = map.len() as u64;
-    let limit = usize::try_from(guard::decompressed_bound(file_len)).unwrap_or(usize::MAX);
-    let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            .with_skip_end_magic(true)
-            .with_record_length_limit(limit),
-    );
     let mut channels = mcap::read::ChannelAccumulator::default();
-    let mut fed = 0usize;
-    let mut ended = false;
-    while let Some(event) = reader.next_event() {
-        // Where the reader is in the file (records inside a chunk report the chunk's end).
-        let near = fed as u64;
-        let record = match event {
-            Ok(LinearReadEvent::ReadRequest(n)) => {
-                let n = n.min(map.len() - fed);
-                reader.insert(n).copy_from_slice(&map[fed..fed + n]);
-                reader.notify_read(n);
-                fed += n;
-                continue;
-            }
-            Ok(LinearReadEvent::Record { data, opcode }) => {
-                guard::check_mcap_record(opcode, data, near, file_len)
-                    .map_err(|e| {
-                        e.replace(&format!("at byte {near}"), &format!("near byte {near}"))
-                    })
-                    .and_then(|()| {
-                        mcap::read::parse_record(opcode, data)
-                            .map_err(|e| format!("record 0x{opcode:02x} near byte {near}: {e}"))
-                    })
-            }
-            Err(e) => Err(format!("near byte {near}: {e}")),
-        };
-        let record = match record {
-            Ok(r) => r,
-            Err(e) => return Ok((ControlFlow::Continue(()), Some(e))),
-        };
+    /// What one record did to the scan.
+    enum Step {
+        Go,
+        Stop,
+        End,
+    }
+    let mut handle = |opcode: u8,
+                      data: &[u8],
+                      near: u64|
+     -> Result<Step, Result<String, BagError>> {
+        let record = guard::check_mcap_record(opcode, data, near, file_len)
+            .and_then(|()| {
+                mcap::read::parse_record(opcode, data)
+                    .map_err(|e| format!("record 0x{opcode:02x} near byte {near}: {e}"))
+            })
+            .map_err(Ok)?;
         use mcap::records::Record;
         let added = match record {
             Record::Schema { header, data } => channels.add_schema_from_slice(header, &data),
             Record::Channel(c) => channels.add_channel(c),
             Record::Message { header, data } => {
                 let Some(ch) = channels.get(header.channel_id) else {
-                    return Ok((
-                        ControlFlow::Continue(()),
-                        Some(format!(
-                            "near byte {near}: message on channel {} that no Channel record defined",
-                            header.channel_id
-                        )),
-                    ));
+                    return Err(Ok(format!(
+                        "near byte {near}: message on channel {} that no Channel record defined",
+                        header.channel_id
+                    )));
                 };
-                if on_message(&ch, &header, &data)?.is_break() {
-                    return Ok((ControlFlow::Break(()), None));
-                }
-                Ok(())
+                return match on_message(&ch, &header, &data) {
+                    Ok(flow) if flow.is_break() => Ok(Step::Stop),
+                    Ok(_) => Ok(Step::Go),
+                    Err(e) => Err(Err(e)),
+                };
             }
             // The data section ends here: what follows is the summary, read separately.
-            Record::DataEnd(_) | Record::Footer(_) => {
-                ended = true;
-                break;
-            }
+            Record::DataEnd(_) | Record::Footer(_) => return Ok(Step::End),
             _ => Ok(()),
         };
-        if let Err(e) = added {
-            return Ok((
-                ControlFlow::Continue(()),
-                Some(format!("near byte {near}: {e}")),
-            ));
+        added
+            .map(|()| Step::Go)
+            .map_err(|e| Ok(format!("near byte {near}: {e}")))
+    };
+    let mut ended = false;
+    // Top-level records are walked here, each length checked against the file; a chunk is
+    // unpacked by `chunk_records` and its records walked the same way.
+    let mut pos = 8usize;
+    while pos < map.len() && !ended {
+        let rest = &map[pos..];
+        let at = pos as u64;
+        let steps: Result<Vec<Step>, Result<String, BagError>> = if rest.len() < 9 {
+            Err(Ok(format!(
+                "the file ends inside the record header at byte {at}: truncated"
+            )))
+        } else {
+            let opcode = rest[0];
+            let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
+            let avail = (rest.len() - 9) as u64;
+            if len > avail {
+                // A truncated record. From an uncompressed chunk, the whole records before the
+                // cut are still delivered.
+                let mut v = Vec::new();
+                let mut why = format!(
+                    "record 0x{opcode:02x} at byte {at} claims {len} bytes but only {avail} remain: truncated"
+                );
+                if opcode == 0x06 && rest.len() >= 9 + 32 {
+                    let clen =
+                        u32::from_le_bytes(rest[37..41].try_into().expect("4 bytes")) as usize;
+                    let start = 9 + 32 + clen + 8;
+                    if clen == 0 && rest.len() >= start {
+                        let (recs, _) = guard::mcap_records_salvage(&rest[start..], at, file_len);
+                        for (op, body, _) in recs {
+                            match handle(op, body, at) {
+                                Ok(st) => {
+                                    let stop = !matches!(st, Step::Go);
+                                    v.push(st);
+                                    if stop {
+                                        break;
+                                    }
+                                }
+                                Err(e) => {
+                                    if let Ok(d) = e {
+                                        why = d;
+                                    } else {
+                                        return Err(e.expect_err("an error"));
+                                    }
+                                    break;
+                                }
+                            }
+                        }
+                    }
+                }
+                if v.iter().any(|s| matches!(s, Step::Stop)) {
+                    return Ok((ControlFlow::Break(()), None));
+                }
+                Err(Ok(why))
+            } else {
+                let body = &rest[9..9 + len as usize];
+                pos += 9 + len as usize;
+                if opcode == 0x06 {
+                    guard::check_mcap_record(0x06, body, at, file_len)
+                        .and_then(|()| chunk_records(body, at, file_len))
+                        .and_then(|inner| {
+                            let recs = guard::mcap_records(&inner, 0, file_len).map_err(|e| {
+                                format!("in the chunk at byte {at} (offset within it): {e}")
+                            })?;
+                            Ok(recs
+                                .iter()
+                                .map(|&(op, body, _)| (op, body.to_vec()))
+                                .collect::<Vec<_>>())
+                        })
+                        .map_err(Ok)
+                        .and_then(|recs| {
+                            let mut v = Vec::new();
+                            for (op, body) in recs {
+                                let st = handle(op, &body, at)?;
+                                let stop = !matches!(st, Step::Go);
+                                v.push(st);
+                                if stop {
+                                    break;
+                                }
+                            }
+                            Ok(v)
+                        })
+                } else {
+                    handle(opcode, body, at).map(|s| vec![s])
+                }
+            }
+        };
+        match steps {
+            Ok(v) => {
+                if v.iter().any(|s| matches!(s, Step::Stop)) {
+                    return Ok((ControlFlow::Break(()), None));
+                }
+                if v.iter().any(|s| matches!(s, Step::End)) {
+                    ended = true;
+                }
+            }
+            Err(Ok(damage)) => return Ok((ControlFlow::Continue(()), Some(damage))),
+            Err(Err(e)) => return Err(e),
         }
     }
     let damage = (!ended).then(|| {

@@ -203,7 +203,7 @@ fn a_truncated_bag_replays_what_can_be_read_and_reports_the_damage() {
             Ok(ControlFlow::Continue(()))
         })
         .unwrap();
-    assert!(got > 0 && got < 20, "delivered {got}");
+    assert!(got > 0 && got < 20, "delivered {got}: {report:?}");
     assert_eq!(report.order, ReadOrder::FileOrder);
     let damage = report.damage.expect("damage reported");
     assert!(damage.contains("cut.mcap"), "{damage}");
@@ -299,6 +299,31 @@ fn hostile_lengths_are_reported_as_damage_instead_of_being_allocated() {
     assert!(!indexed, "{report:?}");
     let damage = report.damage.expect("damage reported");
     assert!(damage.contains("chunk.mcap"), "{damage}");
+
+    // An uncompressed chunk whose records run past its declared size (found by fuzzing: the
+    // mcap crate's reader subtracted past zero), in a bag without summary: damage, no panic.
+    let plain = tmp("hostile-plain");
+    write_sample(&plain, Compression::None);
+    let pfile = plain.join(format!(
+        "{}_0.mcap",
+        plain.file_name().unwrap().to_str().unwrap()
+    ));
+    let pgood = std::fs::read(&pfile).unwrap();
+    let precs = records(&pgood);
+    let chunk = precs.iter().find(|r| r.1 == 0x06).expect("a chunk");
+    let data_end = precs
+        .iter()
+        .find(|r| r.1 == 0x0F)
+        .expect("a Data End record");
+    let mut b = pgood[..data_end.0].to_vec();
+    let at = chunk.2.start + 8 + 8 + 8 + 4 + 4;
+    let size = u64::from_le_bytes(b[at..at + 8].try_into().unwrap());
+    b[at..at + 8].copy_from_slice(&(size - 5).to_le_bytes());
+    let (indexed, _, report) = read_all(&b, "short_chunk.mcap").unwrap();
+    assert!(!indexed);
+    let damage = report.damage.expect("damage reported");
+    assert!(damage.contains("short_chunk.mcap"), "{damage}");
+    let _ = std::fs::remove_dir_all(&plain);
 
     // Cut right after the magic bytes, or right after the Header record: damaged, not empty.
     let e = read_all(&good[..8], "magic.mcap").unwrap_err().to_string();

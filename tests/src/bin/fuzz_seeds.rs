@@ -1,5 +1,5 @@
-//! `seeds DATA CORPUS REPO`: builds the seed corpus of every fuzz target, at run time, from the
-//! real recordings in DATA (`../shared/data`) and the example configurations in REPO/config,
+//! `perturb-fuzz-seeds DATA CORPUS REPO`: builds the seed corpus of the fuzz targets in
+//! `tests/fuzz` (see `tests/fuzz/run`) at run time, from the real recordings in DATA (`../shared/data`) and the example configurations in REPO/config,
 //! into CORPUS/<target>/. Large inputs are cut down to what a fuzzer can mutate quickly (a few
 //! rows of an image, a few hundred points of a cloud, a small bag rewritten from the real one's
 //! messages) so the corpus stays a few hundred kilobytes. Nothing here is committed.
@@ -78,7 +78,7 @@ fn messages(data: &Path) -> Vec<(u8, String, Vec<u8>)> {
 fn main() {
     let args: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();
     let [data, corpus, repo] = args.as_slice() else {
-        eprintln!("usage: seeds DATA CORPUS REPO");
+        eprintln!("usage: perturb-fuzz-seeds DATA CORPUS REPO");
         std::process::exit(2);
     };
     let mut n = 0;
@@ -158,7 +158,11 @@ fn main() {
             let mut mcaps = Vec::new();
             files(&path, ".mcap", &mut mcaps);
             for m in mcaps {
-                seed("mcap", &format!("small{i}"), &std::fs::read(m).expect("bag"));
+                seed(
+                    "mcap",
+                    &format!("small{i}"),
+                    &std::fs::read(m).expect("bag"),
+                );
             }
         }
     }
