@@ -12,15 +12,23 @@
 //! domain_id = 0
 //! interfaces = ["lo"]         # names or IPv4 addresses; omitted: the DDS implementation's default
 //!
-//! [[ingress]]                 # ROS 2 topic -> <stream>/raw
+//! [ros1]                      # for entries with transport = "ros1"
+//! master_uri = "http://127.0.0.1:11311/"   # default: ROS_MASTER_URI
+//! hostname = "127.0.0.1"      # advertised to other nodes; default: ROS_HOSTNAME, ROS_IP, host name
+//! node_name = "perturb_bridge"   # default: [bridge] name
+//! clock = false               # publish /clock from the replayed bag (use_sim_time)
+//!
+//! [[ingress]]                 # ROS 2 (or ROS 1) topic -> <stream>/raw
 //! topic = "/sensing/camera/front/image_raw"
 //! type = "image"              # image | compressed_image | pointcloud2
 //! stream = "camera_front"
-//! qos = { reliability = "best_effort", depth = 5, durability = "volatile" }
+//! transport = "dds"           # or "ros1"
+//! qos = { reliability = "best_effort", depth = 5, durability = "volatile" }   # DDS only
 //!
-//! [[egress]]                  # <stream>/perturbed -> ROS 2 topic
+//! [[egress]]                  # <stream>/perturbed -> ROS 2 (or ROS 1) topic
 //! stream = "camera_front"
 //! topic = "/perturbed/camera/front/image_raw"
+//! transport = "dds"           # or "ros1"
 //!
 //! [replay]                    # bag -> <stream>/raw, with the original timing
 //! bag = "drive.mcap"
@@ -97,6 +105,46 @@ impl Default for BridgeSection {
     }
 }
 
+/// Which middleware an `[[ingress]]` or `[[egress]]` topic is on.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    PartialOrd,
+    Ord,
+    Hash,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Transport {
+    /// ROS 2 over DDS (`[dds]`).
+    #[default]
+    Dds,
+    /// ROS 1 over TCPROS (`[ros1]`).
+    Ros1,
+}
+
+/// `[ros1]`: how the bridge's ROS 1 node reaches the master. Unset keys fall back like the ROS 1
+/// client libraries (see [`crate::ros1::Ros1Settings::resolve`]).
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Ros1Section {
+    /// The master's URI; default `ROS_MASTER_URI`, else `http://localhost:11311/`.
+    pub master_uri: Option<String>,
+    /// The host name or address advertised to other nodes; default `ROS_HOSTNAME`, then
+    /// `ROS_IP`, else this machine's host name.
+    pub hostname: Option<String>,
+    /// The node name; default the `[bridge]` name.
+    pub node_name: Option<String>,
+    /// Publish `/clock` (`rosgraph_msgs/Clock`) from the replayed bag's log time, as `rosbag
+    /// play --clock` does, for ROS 1 nodes running with `use_sim_time`.
+    pub clock: bool,
+}
+
 /// `[dds]`.
 #[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -134,7 +182,10 @@ pub struct IngressEntry {
     pub ros_type: RosType,
     /// Stream to publish into (`<stream>/raw`).
     pub stream: String,
-    /// QoS (sensor data by default).
+    /// ROS 2 (DDS, the default) or ROS 1.
+    #[serde(default)]
+    pub transport: Transport,
+    /// QoS (sensor data by default; DDS only).
     #[serde(default)]
     pub qos: Qos,
 }
@@ -150,7 +201,10 @@ pub struct EgressEntry {
     /// Stream kind; taken from the ingress, replay or synthetic entry of the stream when omitted.
     #[serde(default)]
     pub kind: Option<StreamKind>,
-    /// QoS (sensor data by default).
+    /// ROS 2 (DDS, the default) or ROS 1.
+    #[serde(default)]
+    pub transport: Transport,
+    /// QoS (sensor data by default; DDS only).
     #[serde(default)]
     pub qos: Qos,
 }
@@ -198,7 +252,11 @@ pub struct RecordSection {
     /// Record `<stream>/perturbed` (topic `/<stream>/perturbed`) and the event channel.
     #[serde(default = "yes")]
     pub perturbed: bool,
-    /// Chunk compression: zstd (default), lz4, none.
+    /// Bag format: `mcap` (rosbag2 MCAP, the default) or `bag1` (a ROS 1 `.bag` file).
+    #[serde(default)]
+    pub format: Option<String>,
+    /// Chunk compression: for `mcap` zstd (default), lz4, none; for `bag1` none (default), bz2,
+    /// lz4.
     #[serde(default)]
     pub compression: Option<String>,
     /// Stop after this many perturbed (or, when only raw is recorded, raw) frames per stream.
@@ -296,6 +354,8 @@ pub struct Config {
     pub bridge: BridgeSection,
     /// `[dds]`.
     pub dds: DdsSection,
+    /// `[ros1]`.
+    pub ros1: Ros1Section,
     /// `[[ingress]]`.
     pub ingress: Vec<IngressEntry>,
     /// `[[egress]]`.
@@ -385,6 +445,31 @@ impl Config {
         Ok(cfg)
     }
 
+    /// True if the bridge needs a ROS 1 node (a ROS 1 topic, or `/clock`).
+    pub fn uses_ros1(&self) -> bool {
+        self.ingress.iter().any(|i| i.transport == Transport::Ros1)
+            || self.egress.iter().any(|e| e.transport == Transport::Ros1)
+            || self.ros1.clock
+    }
+
+    /// The ROS 1 node's settings (`[ros1]` with the environment's fallbacks).
+    pub fn ros1_settings(&self) -> Result<crate::ros1::Ros1Settings, String> {
+        crate::ros1::Ros1Settings::resolve(
+            self.ros1.master_uri.as_deref(),
+            self.ros1.hostname.as_deref(),
+            self.ros1.node_name.as_deref().unwrap_or(&self.bridge.name),
+        )
+    }
+
+    /// The bag format of `[record]`.
+    pub fn record_format(&self) -> perturb_bag::BagFormat {
+        self.record
+            .as_ref()
+            .and_then(|r| r.format.as_deref())
+            .and_then(|f| f.parse().ok())
+            .unwrap_or_default()
+    }
+
     /// The kind of every stream a source feeds (ingress, replay with explicit topics, synthetic).
     pub fn source_kinds(&self) -> BTreeMap<String, StreamKind> {
         let mut m = self.streams.clone();
@@ -472,7 +557,7 @@ impl Config {
             check_topic(format!("ingress[{i}].topic"), &e.topic)?;
             check_stream(format!("ingress[{i}].stream"), &e.stream)?;
             check_qos(format!("ingress[{i}].qos.depth"), &e.qos)?;
-            if !ingress_topics.insert(e.topic.clone()) {
+            if !ingress_topics.insert((e.transport, e.topic.clone())) {
                 return Err(err(
                     format!("ingress[{i}].topic"),
                     format!("`{}` is read twice", e.topic),
@@ -491,7 +576,7 @@ impl Config {
             check_topic(format!("egress[{i}].topic"), &e.topic)?;
             check_stream(format!("egress[{i}].stream"), &e.stream)?;
             check_qos(format!("egress[{i}].qos.depth"), &e.qos)?;
-            if ingress_topics.contains(&e.topic) {
+            if ingress_topics.contains(&(e.transport, e.topic.clone())) {
                 return Err(err(
                     format!("egress[{i}].topic"),
                     format!(
@@ -500,7 +585,7 @@ impl Config {
                     ),
                 ));
             }
-            if !egress_topics.insert(e.topic.clone()) {
+            if !egress_topics.insert((e.transport, e.topic.clone())) {
                 return Err(err(
                     format!("egress[{i}].topic"),
                     format!("`{}` is written twice", e.topic),
@@ -610,10 +695,43 @@ impl Config {
                     format!("{t} must be a positive number of seconds"),
                 ));
             }
+            let format = match &r.format {
+                Some(f) => f
+                    .parse::<perturb_bag::BagFormat>()
+                    .map_err(|e| err("record.format".into(), e))?,
+                None => perturb_bag::BagFormat::default(),
+            };
             if let Some(c) = &r.compression {
-                c.parse::<perturb_bag::Compression>()
-                    .map_err(|e| err("record.compression".into(), e))?;
+                match format {
+                    perturb_bag::BagFormat::Rosbag2 => {
+                        c.parse::<perturb_bag::Compression>().map(|_| ())
+                    }
+                    perturb_bag::BagFormat::Ros1 => {
+                        c.parse::<perturb_bag::ros1::Ros1Compression>().map(|_| ())
+                    }
+                }
+                .map_err(|e| err("record.compression".into(), e))?;
             }
+        }
+        if self.ros1.clock {
+            if self.replay.is_none() {
+                return Err(err(
+                    "ros1.clock".into(),
+                    "/clock is published from a replayed bag: add a [replay] section or remove `clock`".into(),
+                ));
+            }
+            if egress_topics.contains(&(Transport::Ros1, "/clock".to_string())) {
+                return Err(err(
+                    "ros1.clock".into(),
+                    "an [[egress]] already writes the ROS 1 topic /clock".into(),
+                ));
+            }
+        }
+        if self.uses_ros1() {
+            self.ros1_settings().map_err(|e| {
+                let (key, problem) = e.split_once(": ").unwrap_or(("(ros1)", &e));
+                err(format!("ros1.{key}"), problem.to_string())
+            })?;
         }
         let anything = !self.ingress.is_empty()
             || !self.egress.is_empty()

@@ -1,12 +1,13 @@
-//! DDS egress: `<stream>/perturbed` out to a ROS 2 topic, header stamp and frame_id bit-exact.
+//! Egress: `<stream>/perturbed` out to a ROS 2 (DDS) or ROS 1 (TCPROS) topic, header stamp and
+//! frame_id bit-exact (and, over ROS 1, the frame's sequence number as header `seq`).
 
 use crate::adapter::{Adapter, Control, POLL};
 use crate::bus::{Bus, Side};
-use crate::dds::{DdsBackend, TopicSpec};
+use crate::dds::TopicSpec;
+use crate::endpoint::Endpoint;
 use crate::frame::{StreamKind, monotonic_ns};
 use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
 use anyhow::Result;
-use std::sync::Arc;
 
 /// One egress mapping.
 pub struct Egress {
@@ -18,16 +19,18 @@ pub struct Egress {
     pub spec: TopicSpec,
     /// Which side of the stream (perturbed, or raw in passthrough setups).
     pub side: Side,
-    /// The DDS participant of the egress direction.
-    pub dds: Arc<dyn DdsBackend>,
+    /// The DDS participant of the egress direction, or the ROS 1 node.
+    pub endpoint: Endpoint,
 }
 
 impl Adapter for Egress {
     fn name(&self) -> String {
+        let ros1 = matches!(self.endpoint, Endpoint::Ros1(_));
         format!(
-            "egress {}/{} -> {}",
+            "egress {}/{} -> {}{}",
             self.stream,
             self.side.as_str(),
+            if ros1 { "ros1:" } else { "" },
             self.spec.topic
         )
     }
@@ -38,7 +41,7 @@ impl Adapter for Egress {
 
     fn run(self: Box<Self>, bus: &dyn Bus, mut ctl: Control) -> Result<AdapterReport> {
         let name = self.name();
-        let mut writer = self.dds.writer(&self.spec)?;
+        let mut writer = self.endpoint.writer(&self.spec)?;
         let mut sub = bus.subscriber(&self.stream, self.kind, self.side)?;
         ctl.ready();
         let mut rep = AdapterReport {
@@ -55,10 +58,11 @@ impl Adapter for Egress {
                     log_bad(&name, rep.bad, &"frame of the wrong kind for this topic");
                     return;
                 }
-                match writer.write(payload) {
+                match writer.write(meta.seq, payload) {
                     Ok(()) => {
                         rep.forwarded += 1;
-                        // The egress hop ends when the DDS write returns.
+                        // The egress hop ends when the write returns (DDS: written; ROS 1:
+                        // serialized and queued for every subscriber).
                         let mut h = meta.hops;
                         h.sink = monotonic_ns();
                         if h.source != 0 {

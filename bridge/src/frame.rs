@@ -67,6 +67,15 @@ impl<'a> Payload<'a> {
         }
     }
 
+    /// The message in a bag format's encoding: CDR, or ROS 1 with `seq` as the header's `seq`.
+    pub fn encode_for(&self, format: perturb_bag::BagFormat, seq: u64) -> Vec<u8> {
+        match (format, self) {
+            (perturb_bag::BagFormat::Rosbag2, _) => self.encode(),
+            (perturb_bag::BagFormat::Ros1, Payload::Image(m)) => m.encode_ros1(seq as u32),
+            (perturb_bag::BagFormat::Ros1, Payload::Cloud(m)) => m.encode_ros1(seq as u32),
+        }
+    }
+
     /// Checks that the message is internally consistent (image size, step and data length agree;
     /// the point layout is valid and the data holds the points), so a bad message is refused
     /// where it enters instead of failing further down the pipeline.

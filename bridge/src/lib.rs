@@ -1,7 +1,9 @@
 //! # perturb-bridge
 //!
 //! Connects the perturbation middleware to the outside world: ROS 2 topics in and out over DDS,
-//! rosbag2 MCAP replay (hardware-in-the-loop) and recording, and a synthetic camera and VLP-32C.
+//! ROS 1 topics over TCPROS, bag replay (rosbag2 MCAP, ROS 1 `.bag` and ROS 1 MCAP;
+//! hardware-in-the-loop) and recording (rosbag2 MCAP or ROS 1 `.bag`), and a synthetic camera
+//! and VLP-32C.
 //!
 //! Every adapter is a thread that talks to a [`bus::Bus`]: sources publish into
 //! `<stream>/raw`, sinks read `<stream>/perturbed`, and `perturbd` sits in between.
@@ -12,11 +14,13 @@ pub mod bus;
 pub mod config;
 pub mod dds;
 pub mod egress;
+pub mod endpoint;
 pub mod frame;
 pub mod ingress;
 pub mod iox;
 pub mod record;
 pub mod replay;
+pub mod ros1;
 pub mod run;
 pub mod stats;
 pub mod synthetic;

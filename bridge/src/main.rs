@@ -1,5 +1,6 @@
-//! `perturb-bridge`: ROS 2 (DDS) ingress and egress, MCAP replay and record, the synthetic sensor
-//! source, around the perturbation daemon `perturbd`.
+//! `perturb-bridge`: ROS 2 (DDS) and ROS 1 (TCPROS) ingress and egress, bag replay and record
+//! (rosbag2 MCAP, ROS 1 `.bag`), the synthetic sensor source, around the perturbation daemon
+//! `perturbd`.
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -38,9 +39,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Replay a rosbag2 MCAP bag into the raw streams with its original timing.
+    /// Replay a bag (rosbag2 MCAP, ROS 1 .bag or ROS 1 MCAP) into the raw streams with its
+    /// original timing.
     Replay {
-        /// The bag (`.mcap` file or rosbag2 directory).
+        /// The bag (`.mcap` file, rosbag2 directory, or ROS 1 `.bag` file).
         bag: PathBuf,
         /// Speed factor (0 = as fast as possible).
         #[arg(long, default_value_t = 1.0)]
@@ -67,15 +69,26 @@ enum Command {
         /// default: the DDS implementation's choice). `lo` keeps it on this computer.
         #[arg(long = "dds-interface")]
         dds_interfaces: Vec<String>,
-        /// Also record the streams into this bag directory.
+        /// Publish the --ros-prefix topics on ROS 1 (TCPROS; master from ROS_MASTER_URI)
+        /// instead of ROS 2.
+        #[arg(long)]
+        ros1: bool,
+        /// Publish the bag's time on the ROS 1 topic /clock (for nodes with use_sim_time).
+        #[arg(long)]
+        clock: bool,
+        /// Also record the streams into this bag (a directory; a `.bag` path records a ROS 1 bag).
         #[arg(long)]
         record: Option<PathBuf>,
     },
-    /// Record streams (raw and perturbed) into a rosbag2 MCAP bag with the perturbation events.
+    /// Record streams (raw and perturbed) into a bag with the perturbation events.
     Record {
-        /// Output bag directory.
+        /// Output: the bag directory (mcap), or the `.bag` file (bag1; without the extension a
+        /// directory holding NAME.bag).
         #[arg(long)]
         out: PathBuf,
+        /// Bag format: mcap (rosbag2 MCAP) or bag1 (ROS 1 .bag).
+        #[arg(long, default_value = "mcap")]
+        format: String,
         /// STREAM=image or STREAM=cloud (repeatable).
         #[arg(long = "stream", required = true)]
         streams: Vec<String>,
@@ -157,8 +170,11 @@ fn command_config(cmd: &Command) -> Result<Config> {
             ros_prefix,
             dds,
             dds_interfaces,
+            ros1,
+            clock,
             record,
         } => {
+            cfg.ros1.clock = *clock;
             cfg.bridge.bus = bus_kind(bus)?;
             cfg.dds.backend = dds.parse::<BackendKind>().map_err(anyhow::Error::msg)?;
             cfg.dds.interfaces = dds_interfaces.clone();
@@ -191,6 +207,11 @@ fn command_config(cmd: &Command) -> Result<Config> {
                         stream: stream.clone(),
                         topic: format!("{}{}", prefix.trim_end_matches('/'), topic),
                         kind: Some(*kind),
+                        transport: if *ros1 {
+                            perturb_bridge::config::Transport::Ros1
+                        } else {
+                            perturb_bridge::config::Transport::Dds
+                        },
                         qos: Qos::default(),
                     });
                 }
@@ -201,6 +222,11 @@ fn command_config(cmd: &Command) -> Result<Config> {
                     streams: routes.iter().map(|r| r.1.clone()).collect(),
                     raw: true,
                     perturbed: cfg.bridge.bus == BusKind::Iceoryx2,
+                    format: Some(if out.extension().is_some_and(|e| e == "bag") {
+                        "bag1".into()
+                    } else {
+                        "mcap".into()
+                    }),
                     compression: None,
                     max_frames: None,
                     seconds: None,
@@ -209,6 +235,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
         }
         Command::Record {
             out,
+            format,
             streams,
             raw_only,
             perturbed_only,
@@ -235,6 +262,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
                 streams: names,
                 raw: !perturbed_only,
                 perturbed: !raw_only,
+                format: Some(format.clone()),
                 compression: None,
                 max_frames: *max_frames,
                 seconds: *seconds,

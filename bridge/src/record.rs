@@ -1,6 +1,9 @@
 //! Recording: streams into a rosbag2 MCAP bag (the directory with `metadata.yaml` that `ros2 bag`
-//! and `rosbags` read), plus the `/perturb/events` channel saying, for every perturbed frame,
-//! which perturbation, severity and seed was active.
+//! and `rosbags` read) or, with `format = "bag1"`, a ROS 1 `.bag` (`rosbag info`, `rosbag play`,
+//! Python `rosbag`; `out` ending in `.bag` is the file, otherwise a directory holding
+//! `NAME.bag`), plus the `/perturb/events` channel (`std_msgs/String`) saying, for every
+//! perturbed frame, which perturbation, severity and seed was active. In a ROS 1 bag the frame's
+//! sequence number is the header `seq`.
 //!
 //! Topics: `<stream>/raw` is recorded as `/<stream>/raw`, `<stream>/perturbed` as
 //! `/<stream>/perturbed` (characters that ROS topic names do not allow become `_`). A message's
@@ -14,8 +17,8 @@ use crate::frame::{StreamKind, monotonic_ns, wall_ns};
 use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
 use anyhow::{Context, Result};
 use crossbeam::channel::{Sender, bounded};
-use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string};
-use perturb_bag::{BagWriter, Compression, WriterOptions};
+use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string_for};
+use perturb_bag::{AnyWriter, BagFormat};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -42,7 +45,8 @@ struct Msg {
     channel: u16,
     log_time: u64,
     publish_time: u64,
-    cdr: Vec<u8>,
+    /// The message in the bag's encoding.
+    bytes: Vec<u8>,
     event: Option<Vec<u8>>,
 }
 
@@ -65,17 +69,11 @@ impl Adapter for Record {
 
     fn run(self: Box<Self>, bus: &dyn Bus, mut ctl: Control) -> Result<AdapterReport> {
         let name = self.name();
-        let compression = match &self.cfg.compression {
-            Some(c) => c.parse::<Compression>().map_err(anyhow::Error::msg)?,
-            None => Compression::Zstd,
+        let format = match &self.cfg.format {
+            Some(f) => f.parse::<BagFormat>().map_err(anyhow::Error::msg)?,
+            None => BagFormat::Rosbag2,
         };
-        let mut writer = BagWriter::create(
-            &self.cfg.out,
-            &WriterOptions {
-                compression,
-                ..Default::default()
-            },
-        )?;
+        let mut writer = AnyWriter::create(&self.cfg.out, format, self.cfg.compression.as_deref())?;
         let mut sides = Vec::new();
         for stream in &self.cfg.streams {
             let kind = *self.kinds.get(stream).with_context(|| {
@@ -168,7 +166,8 @@ impl Adapter for Record {
                                     severity: meta.applied.as_ref().map(|a| a.severity),
                                     seed: meta.applied.as_ref().map(|a| a.seed),
                                 };
-                                encode_string(
+                                encode_string_for(
+                                    format,
                                     &serde_json::to_string(&ev).unwrap_or_else(|_| "{}".into()),
                                 )
                             });
@@ -176,7 +175,7 @@ impl Adapter for Record {
                                 channel: ch,
                                 log_time: wall_ns(),
                                 publish_time: meta.log_time,
-                                cdr: payload.encode(),
+                                bytes: payload.encode_for(format, meta.seq),
                                 event,
                             });
                         });
@@ -213,7 +212,7 @@ impl Adapter for Record {
             // Write until every stream thread has finished and the queue is empty.
             let mut written = 0u64;
             for m in rx.iter() {
-                if let Err(e) = writer.write(m.channel, m.log_time, m.publish_time, &m.cdr) {
+                if let Err(e) = writer.write(m.channel, m.log_time, m.publish_time, &m.bytes) {
                     rep.failed += 1;
                     log_bad(&name, rep.failed, &e);
                     continue;

@@ -1,10 +1,12 @@
-//! MCAP replay: a rosbag2 bag's sensor messages, in log-time order, paced by their original
-//! timing, into `<stream>/raw` (the hardware-in-the-loop source).
+//! Bag replay: the sensor messages of a rosbag2 MCAP bag, a ROS 1 `.bag` or a ROS 1 profile MCAP
+//! file, in log-time order, paced by their original timing, into `<stream>/raw` (the
+//! hardware-in-the-loop source).
 //!
 //! Pacing: message `i` is published at `start + (log_time_i - log_time_0) / rate`; `rate = 0`
 //! publishes as fast as the sinks take them. Looping starts the bag again right after its last
 //! message (header stamps are the bag's, unchanged). A damaged bag is replayed up to the damage,
-//! which is reported; a ROS 1 profile bag is refused with perturb-bag's message.
+//! which is reported. With `[ros1] clock = true` the bag's log time is published on the ROS 1
+//! topic `/clock` before each message and every 10 ms in between (`rosbag play --clock`).
 
 use crate::adapter::{Adapter, Control};
 use crate::bus::{Bus, BusPublisher, Side};
@@ -12,7 +14,7 @@ use crate::config::ReplaySection;
 use crate::frame::{FrameMeta, Hops, OwnedPayload, Payload, StreamKind, monotonic_ns};
 use crate::stats::{AdapterReport, log_bad};
 use anyhow::{Context, Result};
-use perturb_bag::{Bag, Filter, SensorMessage};
+use perturb_bag::{Bag, Filter, SensorMessage, SensorType};
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
@@ -36,10 +38,9 @@ impl Replay {
     pub fn open(cfg: ReplaySection) -> Result<Self> {
         let bag = Bag::open(&cfg.bag)?;
         let topics = bag.topics()?;
-        let kind_of = |type_name: &str| match type_name {
-            "sensor_msgs/msg/Image" | "sensor_msgs/msg/CompressedImage" => Some(StreamKind::Image),
-            "sensor_msgs/msg/PointCloud2" => Some(StreamKind::Cloud),
-            _ => None,
+        let kind_of = |type_name: &str| match SensorType::of(type_name)? {
+            SensorType::Image | SensorType::CompressedImage => Some(StreamKind::Image),
+            SensorType::PointCloud2 => Some(StreamKind::Cloud),
         };
         let mut routes = BTreeMap::new();
         if cfg.topics.is_empty() {
@@ -102,6 +103,18 @@ impl Replay {
         name: &str,
         emit: &mut dyn FnMut(&str, &FrameMeta, &Payload<'_>) -> Result<()>,
     ) -> Result<AdapterReport> {
+        self.run_with_clock(ctl, name, emit, None)
+    }
+
+    /// [`Self::run`], also calling `clock(log_time)` with the bag's time before each message and
+    /// every 10 ms while waiting for the next one (only when paced, `rate > 0`).
+    pub fn run_with_clock(
+        &self,
+        ctl: &Control,
+        name: &str,
+        emit: &mut dyn FnMut(&str, &FrameMeta, &Payload<'_>) -> Result<()>,
+        mut clock: Option<&mut dyn FnMut(u64)>,
+    ) -> Result<AdapterReport> {
         let mut rep = AdapterReport {
             name: name.to_string(),
             ..Default::default()
@@ -143,10 +156,29 @@ impl Replay {
                         + Duration::from_secs_f64(
                             m.log_time.saturating_sub(log0) as f64 / 1e9 / self.cfg.rate,
                         );
-                    let now = Instant::now();
-                    if due > now && !ctl.sleep(due - now) {
-                        return Ok(ControlFlow::Break(()));
+                    match clock.as_deref_mut() {
+                        None => {
+                            let now = Instant::now();
+                            if due > now && !ctl.sleep(due - now) {
+                                return Ok(ControlFlow::Break(()));
+                            }
+                        }
+                        Some(tick) => loop {
+                            let now = Instant::now();
+                            // The bag's time now, between the last message and this one.
+                            let behind =
+                                due.saturating_duration_since(now).as_secs_f64() * self.cfg.rate;
+                            tick(m.log_time.saturating_sub((behind * 1e9) as u64));
+                            if due <= now {
+                                break;
+                            }
+                            if !ctl.sleep((due - now).min(Duration::from_millis(10))) {
+                                return Ok(ControlFlow::Break(()));
+                            }
+                        },
                     }
+                } else if let Some(tick) = clock.as_deref_mut() {
+                    tick(m.log_time);
                 }
                 let decoded = match m.decode() {
                     Some(Ok(d)) => d,
@@ -251,12 +283,17 @@ impl Replay {
     }
 }
 
-/// The replay adapter: the engine publishing into the bus.
-pub struct ReplayAdapter(pub Replay);
+/// The replay adapter: the engine publishing into the bus (and, optionally, `/clock` on ROS 1).
+pub struct ReplayAdapter {
+    /// The engine.
+    pub replay: Replay,
+    /// The ROS 1 node to publish `/clock` on, if `[ros1] clock` is set.
+    pub clock: Option<std::sync::Arc<crate::ros1::Node>>,
+}
 
 impl Adapter for ReplayAdapter {
     fn name(&self) -> String {
-        format!("replay {}", self.0.cfg.bag.display())
+        format!("replay {}", self.replay.cfg.bag.display())
     }
 
     fn is_sink(&self) -> bool {
@@ -266,16 +303,32 @@ impl Adapter for ReplayAdapter {
     fn run(self: Box<Self>, bus: &dyn Bus, mut ctl: Control) -> Result<AdapterReport> {
         let name = self.name();
         let mut pubs: BTreeMap<String, Box<dyn BusPublisher>> = BTreeMap::new();
-        for (stream, kind) in self.0.routes.values() {
+        for (stream, kind) in self.replay.routes.values() {
             pubs.insert(stream.clone(), bus.publisher(stream, *kind, Side::Raw)?);
         }
+        let mut clock = match &self.clock {
+            Some(node) => Some(crate::ros1::ClockPublisher::new(node)?),
+            None => None,
+        };
+        let mut tick = |ns: u64| {
+            if let Some(c) = clock.as_mut() {
+                c.publish(ns);
+            }
+        };
         ctl.ready();
-        let mut rep = self.0.run(&ctl, &name, &mut |stream, meta, payload| {
-            let p = pubs
-                .get_mut(stream)
-                .context("replay route without publisher")?;
-            p.publish(meta, payload)
-        })?;
+        let mut rep = self.replay.run_with_clock(
+            &ctl,
+            &name,
+            &mut |stream, meta, payload| {
+                let p = pubs
+                    .get_mut(stream)
+                    .context("replay route without publisher")?;
+                p.publish(meta, payload)
+            },
+            self.clock
+                .is_some()
+                .then_some(&mut tick as &mut dyn FnMut(u64)),
+        )?;
         rep.undelivered = pubs.values().map(|p| p.undelivered()).sum();
         Ok(rep)
     }

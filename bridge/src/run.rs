@@ -7,9 +7,10 @@
 
 use crate::adapter::{Adapter, Control};
 use crate::bus::{Bus, Side};
-use crate::config::{BusKind, Config};
+use crate::config::{BusKind, Config, Transport};
 use crate::dds::{self, DdsBackend, TopicSpec};
 use crate::egress::Egress;
+use crate::endpoint::Endpoint;
 use crate::frame::StreamKind;
 use crate::ingress::Ingress;
 use crate::record::Record;
@@ -88,26 +89,52 @@ pub fn resolve(cfg: &Config) -> Result<Resolved> {
     Ok(Resolved { replay, kinds })
 }
 
-/// Builds the adapters (opens bags and DDS participants; errors name what failed).
+/// Builds the adapters (opens bags, DDS participants and the ROS 1 node; errors name what
+/// failed).
 pub fn plan(cfg: &Config) -> Result<Plan> {
     let Resolved { replay, kinds } = resolve(cfg)?;
     let mut sources: Vec<Box<dyn Adapter>> = Vec::new();
     let mut sinks: Vec<Box<dyn Adapter>> = Vec::new();
     let mut endless = false;
+    // One ROS 1 node for both directions: the configuration refuses a topic read and written
+    // on the same transport, so it never subscribes to its own output.
+    let ros1 = if cfg.uses_ros1() {
+        let settings = cfg.ros1_settings().map_err(anyhow::Error::msg)?;
+        Some(Arc::new(
+            crate::ros1::Node::start(&settings).context("ros1 (the bridge's ROS 1 node)")?,
+        ))
+    } else {
+        None
+    };
+    let ros1_endpoint = || -> Result<Endpoint> {
+        Ok(Endpoint::Ros1(
+            ros1.clone().context("the ROS 1 node was not started")?,
+        ))
+    };
     if let Some(replay) = replay {
         endless |= replay.cfg.looped;
-        sources.push(Box::new(ReplayAdapter(replay)));
+        let clock = if cfg.ros1.clock { ros1.clone() } else { None };
+        sources.push(Box::new(ReplayAdapter { replay, clock }));
     }
     if !cfg.ingress.is_empty() {
-        let dds: Arc<dyn DdsBackend> = Arc::from(
-            dds::backend(
-                &cfg.dds.participant(),
-                &format!("{}_ingress", cfg.bridge.name),
-            )
-            .context("dds (ingress participant)")?,
-        );
+        let dds: Option<Arc<dyn DdsBackend>> =
+            if cfg.ingress.iter().any(|i| i.transport == Transport::Dds) {
+                Some(Arc::from(
+                    dds::backend(
+                        &cfg.dds.participant(),
+                        &format!("{}_ingress", cfg.bridge.name),
+                    )
+                    .context("dds (ingress participant)")?,
+                ))
+            } else {
+                None
+            };
         endless = true;
         for i in &cfg.ingress {
+            let endpoint = match (i.transport, &dds) {
+                (Transport::Dds, Some(d)) => Endpoint::Dds(d.clone()),
+                _ => ros1_endpoint()?,
+            };
             sources.push(Box::new(Ingress {
                 spec: TopicSpec {
                     topic: i.topic.clone(),
@@ -115,7 +142,7 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
                     qos: i.qos,
                 },
                 stream: i.stream.clone(),
-                dds: dds.clone(),
+                endpoint,
             }));
         }
     }
@@ -128,13 +155,18 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
         sources.push(Box::new(Synthetic::lidar(l.clone())));
     }
     if !cfg.egress.is_empty() {
-        let dds: Arc<dyn DdsBackend> = Arc::from(
-            dds::backend(
-                &cfg.dds.participant(),
-                &format!("{}_egress", cfg.bridge.name),
-            )
-            .context("dds (egress participant)")?,
-        );
+        let dds: Option<Arc<dyn DdsBackend>> =
+            if cfg.egress.iter().any(|e| e.transport == Transport::Dds) {
+                Some(Arc::from(
+                    dds::backend(
+                        &cfg.dds.participant(),
+                        &format!("{}_egress", cfg.bridge.name),
+                    )
+                    .context("dds (egress participant)")?,
+                ))
+            } else {
+                None
+            };
         for (i, e) in cfg.egress.iter().enumerate() {
             let kind = *kinds.get(&e.stream).with_context(|| {
                 format!(
@@ -155,7 +187,10 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
                     qos: e.qos,
                 },
                 side: Side::Perturbed,
-                dds: dds.clone(),
+                endpoint: match (e.transport, &dds) {
+                    (Transport::Dds, Some(d)) => Endpoint::Dds(d.clone()),
+                    _ => ros1_endpoint()?,
+                },
             }));
         }
     }
@@ -349,6 +384,12 @@ pub fn print_reports(reports: &[AdapterReport]) {
             println!(
                 "    note: {} frame(s) published while no reader (perturbd) was connected: lost",
                 r.undelivered
+            );
+        }
+        if r.lost > 0 {
+            println!(
+                "    lost before the bridge (gaps in the ROS 1 header seq): {}",
+                r.lost
             );
         }
         for n in &r.notes {

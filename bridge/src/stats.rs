@@ -139,6 +139,8 @@ pub struct AdapterReport {
     /// it was restarting); the daemon counts them as `dropped_upstream` once it is back.
     #[serde(default)]
     pub undelivered: u64,
+    /// Frames lost before the adapter: gaps in a ROS 1 publisher's header `seq` (ingress).
+    pub lost: u64,
     /// Damage found (bags).
     pub damage: Vec<String>,
     /// Notes.

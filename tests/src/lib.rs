@@ -369,3 +369,199 @@ pub fn events(msgs: &[serde_json::Value]) -> Vec<serde_json::Value> {
         .filter_map(|m| serde_json::from_str(m["string"].as_str()?).ok())
         .collect()
 }
+
+/// Debian's ROS 1 packages the ROS 1 tests need (and `.ci/run` installs).
+pub const ROS1_PACKAGES: &str = "Debian's ROS 1 packages (apt-get install ros-core python3-rospy python3-rosbag python3-sensor-msgs python3-std-msgs python3-rostopic)";
+
+/// The Python that has Debian's ROS 1 modules (`PERTURB_ROS_PYTHON`, default `/usr/bin/python3`:
+/// a virtualenv's or pyenv's Python does not see Debian's packages).
+pub fn ros_python() -> String {
+    std::env::var("PERTURB_ROS_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".into())
+}
+
+/// True if `roscore`, `rostopic`, `rosbag` and the rospy message modules are there. When they
+/// are not, the test is skipped with a message, or fails if `PERTURB_REQUIRE_ORACLES=1` (CI).
+pub fn have_ros1() -> bool {
+    let tools = ["roscore", "rostopic", "rosbag"].iter().all(|t| {
+        Command::new("sh")
+            .args(["-c", &format!("command -v {t}")])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    let modules = Command::new(ros_python())
+        .args([
+            "-c",
+            "import rospy, rosbag, sensor_msgs.msg, std_msgs.msg, rosgraph_msgs.msg",
+        ])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    let ok = tools && modules;
+    if !ok {
+        assert!(
+            std::env::var("PERTURB_REQUIRE_ORACLES").ok().as_deref() != Some("1"),
+            "{ROS1_PACKAGES} are missing and PERTURB_REQUIRE_ORACLES=1"
+        );
+        eprintln!("SKIP: {ROS1_PACKAGES} are missing");
+    }
+    ok
+}
+
+/// A free TCP port on 127.0.0.1.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+/// A real `roscore` on 127.0.0.1 on a free port, with a private `ROS_HOME`; stopped on drop.
+pub struct Ros1Master {
+    /// Its port.
+    pub port: u16,
+    /// `http://127.0.0.1:PORT/`.
+    pub uri: String,
+    /// The private ROS_HOME of every process of the test.
+    pub home: PathBuf,
+    child: Option<Child>,
+}
+
+impl Ros1Master {
+    /// A master that is not started yet (to start a client before its master).
+    pub fn new(dir: &Path) -> Self {
+        let port = free_port();
+        let home = dir.join("ros_home");
+        std::fs::create_dir_all(&home).expect("ROS_HOME");
+        Ros1Master {
+            port,
+            uri: format!("http://127.0.0.1:{port}/"),
+            home,
+            child: None,
+        }
+    }
+
+    /// Starts a master in `dir` and waits until it answers.
+    pub fn start(dir: &Path) -> Self {
+        let mut m = Self::new(dir);
+        m.up();
+        m
+    }
+
+    /// Puts the ROS 1 environment of this master on a command: `ROS_MASTER_URI`,
+    /// `ROS_HOSTNAME=127.0.0.1`, the private `ROS_HOME`, no `ROS_IP`.
+    pub fn env<'a>(&self, c: &'a mut Command) -> &'a mut Command {
+        c.env("ROS_MASTER_URI", &self.uri)
+            .env("ROS_HOSTNAME", "127.0.0.1")
+            .env("ROS_HOME", &self.home)
+            .env("ROS_LOG_DIR", self.home.join("log"))
+            .env_remove("ROS_IP")
+    }
+
+    /// A command with this master's environment.
+    pub fn command(&self, program: impl AsRef<std::ffi::OsStr>) -> Command {
+        let mut c = Command::new(program);
+        self.env(&mut c);
+        c
+    }
+
+    /// Starts (or restarts) `roscore -p PORT` and waits until it accepts connections.
+    pub fn up(&mut self) {
+        use std::os::unix::process::CommandExt;
+        assert!(self.child.is_none(), "the master already runs");
+        let log = std::fs::File::create(self.home.join("roscore.log")).expect("roscore log");
+        let child = self
+            .command("roscore")
+            .args(["-p", &self.port.to_string()])
+            .process_group(0)
+            .stdin(Stdio::null())
+            .stdout(log.try_clone().expect("log"))
+            .stderr(log)
+            .spawn()
+            .expect("starting roscore");
+        self.child = Some(child);
+        let start = Instant::now();
+        loop {
+            if std::net::TcpStream::connect(("127.0.0.1", self.port)).is_ok() {
+                break;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(30),
+                "roscore did not listen on {} within 30 s:\n{}",
+                self.port,
+                std::fs::read_to_string(self.home.join("roscore.log")).unwrap_or_default()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Stops the master (SIGINT to its process group, SIGKILL after 10 s) and waits until the
+    /// port is free.
+    pub fn down(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let pgid = c.id() as i32;
+            // SAFETY: signalling the process group of a child this helper started.
+            unsafe { libc::kill(-pgid, libc::SIGINT) };
+            let start = Instant::now();
+            while start.elapsed() < Duration::from_secs(10) {
+                if let Ok(Some(_)) = c.try_wait() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            // SAFETY: as above; whatever of the group is left (rosmaster, rosout).
+            unsafe { libc::kill(-pgid, libc::SIGKILL) };
+            let _ = c.wait();
+            let start = Instant::now();
+            while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_ok()
+                && start.elapsed() < Duration::from_secs(10)
+            {
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+    }
+}
+
+impl Drop for Ros1Master {
+    fn drop(&mut self) {
+        self.down();
+    }
+}
+
+/// A rospy peer (`tests/tests/ros1_peer.py`) with `args`, its stdout piped.
+pub fn ros1_peer(master: &Ros1Master, args: &[&str]) -> Child {
+    master
+        .command(ros_python())
+        .arg(workspace().join("tests/tests/ros1_peer.py"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("starting the rospy peer")
+}
+
+/// Waits for a rospy subscriber's `{"ready": true}` line; returns the reader of its later lines.
+pub fn ros1_ready(child: &mut Child) -> BufReader<std::process::ChildStdout> {
+    let mut r = BufReader::new(child.stdout.take().expect("piped stdout"));
+    let mut line = String::new();
+    r.read_line(&mut line).expect("peer output");
+    assert!(
+        line.contains("ready"),
+        "the rospy subscriber did not start: {line}"
+    );
+    r
+}
+
+/// The JSON lines a rospy peer printed until it exited.
+pub fn ros1_lines(mut r: impl BufRead, child: &mut Child) -> Vec<serde_json::Value> {
+    let mut out = Vec::new();
+    let mut line = String::new();
+    while r.read_line(&mut line).is_ok_and(|n| n > 0) {
+        if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line)
+            && v.get("ready").is_none()
+        {
+            out.push(v);
+        }
+        line.clear();
+    }
+    let _ = child.wait();
+    out
+}

@@ -50,6 +50,14 @@ pub fn encode_string(s: &str) -> Vec<u8> {
     b
 }
 
+/// Encodes a `std_msgs/String` in the encoding of a bag format (CDR or ROS 1).
+pub fn encode_string_for(format: crate::BagFormat, s: &str) -> Vec<u8> {
+    match format {
+        crate::BagFormat::Rosbag2 => encode_string(s),
+        crate::BagFormat::Ros1 => perturb_core::formats::ros1::encode_string(s),
+    }
+}
+
 /// Decodes a `std_msgs/msg/String` from CDR (either byte order).
 pub fn decode_string(b: &[u8]) -> Option<String> {
     if b.len() < 8 {

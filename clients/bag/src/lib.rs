@@ -1,13 +1,17 @@
 //! # perturb-bag
 //!
-//! rosbag2 bags in MCAP storage: reading sensor messages in log-time order (the order a replayer
-//! needs, which is not always file order) and writing bags that `ros2 bag`, the Python `rosbags`
-//! package and the `mcap` tools read.
+//! Bags: reading sensor messages in log-time order (the order a replayer needs, which is not
+//! always file order) from rosbag2 MCAP bags, ROS 1 profile MCAP files and ROS 1 `.bag` files
+//! (format 2.0, uncompressed, bz2 or lz4 chunks) through one API ([`Bag`]), and writing rosbag2
+//! bags that `ros2 bag`, the Python `rosbags` package and the `mcap` tools read ([`BagWriter`]) or
+//! ROS 1 bags that `rosbag info`/`rosbag play` read ([`ros1::Ros1Writer`]), or either through
+//! [`AnyWriter`].
 //!
 //! Reading memory-maps the file and decompresses one chunk at a time, so a bag of hundreds of
-//! gigabytes replays in bounded memory. A bag whose summary is missing or corrupt (a recorder that
+//! gigabytes replays in bounded memory. A bag whose index is missing or corrupt (a recorder that
 //! was killed, a truncated copy) is read in file order up to the damage, and the damage is
-//! reported. ROS 1 profile MCAP files are refused with a message saying how to convert them.
+//! reported. Each message says its encoding (`cdr` or `ros1`) and carries its type's schema;
+//! [`BagMessage::decode`] decodes the sensor types in either.
 //!
 //! ```no_run
 //! use perturb_bag::{Bag, Filter};
@@ -20,14 +24,20 @@
 //! # Ok::<(), perturb_bag::BagError>(())
 //! ```
 
+pub mod dynamic;
 pub mod events;
 pub mod guard;
 mod read;
+pub mod ros1;
 pub mod schema;
 mod write;
+mod writer;
 
-pub use read::{Bag, BagMessage, Filter, ReadOrder, ReadReport, SensorMessage, TopicInfo};
+pub use read::{
+    Bag, BagMessage, Filter, ReadOrder, ReadReport, SensorMessage, SensorType, TopicInfo,
+};
 pub use write::{BagWriter, Compression, WriterOptions};
+pub use writer::{AnyWriter, BagFormat};
 
 use std::path::PathBuf;
 
@@ -42,23 +52,13 @@ pub enum BagError {
         /// The I/O error.
         source: std::io::Error,
     },
-    /// The file is not a readable MCAP file.
-    #[error("{path}: not a readable MCAP file: {reason}")]
+    /// The file is not a readable bag (MCAP or ROS 1 `.bag`).
+    #[error("{path}: not a readable bag: {reason}")]
     NotMcap {
         /// The file.
         path: PathBuf,
         /// What is wrong.
         reason: String,
-    },
-    /// The bag uses a profile this project does not read.
-    #[error("{path}: MCAP profile `{profile}` is not supported: {hint}")]
-    UnsupportedProfile {
-        /// The file.
-        path: PathBuf,
-        /// The profile found.
-        profile: String,
-        /// What to do instead.
-        hint: &'static str,
     },
     /// A message could not be decoded.
     #[error("{path}: message on `{topic}` at log time {log_time} ns: {source}")]

@@ -1,7 +1,9 @@
-//! Reading rosbag2 MCAP bags.
+//! Reading bags: rosbag2 MCAP (CDR), ROS 1 profile MCAP and ROS 1 `.bag` files, through one API
+//! that delivers every message in log-time order with its topic, type, schema and encoding.
 
 use crate::BagError;
 use crate::guard;
+use crate::ros1::read::Ros1Bag;
 use mcap::sans_io::indexed_reader::{IndexedReadEvent, IndexedReader, IndexedReaderOptions};
 use perturb_core::formats::ros::{CompressedImageMsg, ImageMsg, PointCloud2Msg};
 use std::collections::BTreeMap;
@@ -21,10 +23,40 @@ pub struct Filter {
 }
 
 impl Filter {
-    fn accepts(&self, topic: &str, log_time: u64) -> bool {
+    pub(crate) fn accepts(&self, topic: &str, log_time: u64) -> bool {
         (self.topics.is_empty() || self.topics.iter().any(|t| t == topic))
-            && self.start.is_none_or(|s| log_time >= s)
-            && self.end.is_none_or(|e| log_time < e)
+            && self.accepts_time(log_time)
+    }
+
+    pub(crate) fn accepts_time(&self, log_time: u64) -> bool {
+        self.start.is_none_or(|s| log_time >= s) && self.end.is_none_or(|e| log_time < e)
+    }
+}
+
+/// The sensor message types the project decodes, whatever their spelling in the bag.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SensorType {
+    /// `sensor_msgs/msg/Image` (ROS 2) or `sensor_msgs/Image` (ROS 1).
+    Image,
+    /// `sensor_msgs/msg/CompressedImage` or `sensor_msgs/CompressedImage`.
+    CompressedImage,
+    /// `sensor_msgs/msg/PointCloud2` or `sensor_msgs/PointCloud2`.
+    PointCloud2,
+}
+
+impl SensorType {
+    /// The sensor type of a type name in its ROS 2 or ROS 1 spelling.
+    pub fn of(type_name: &str) -> Option<Self> {
+        match type_name {
+            "sensor_msgs/msg/Image" | "sensor_msgs/Image" => Some(SensorType::Image),
+            "sensor_msgs/msg/CompressedImage" | "sensor_msgs/CompressedImage" => {
+                Some(SensorType::CompressedImage)
+            }
+            "sensor_msgs/msg/PointCloud2" | "sensor_msgs/PointCloud2" => {
+                Some(SensorType::PointCloud2)
+            }
+            _ => None,
+        }
     }
 }
 
@@ -33,15 +65,17 @@ impl Filter {
 pub struct TopicInfo {
     /// Topic name.
     pub topic: String,
-    /// Message type (`sensor_msgs/msg/Image`).
+    /// Message type as the bag spells it (`sensor_msgs/msg/Image` in ROS 2 bags,
+    /// `sensor_msgs/Image` in ROS 1 ones; see [`SensorType::of`]).
     pub type_name: String,
-    /// Schema encoding (`ros2msg`, `ros2idl`).
+    /// Schema encoding (`ros2msg`, `ros2idl`; `ros1msg` for ROS 1).
     pub schema_encoding: String,
     /// Schema text.
     pub schema: Vec<u8>,
-    /// Message encoding (`cdr`).
+    /// Message encoding (`cdr`; `ros1` for ROS 1).
     pub message_encoding: String,
-    /// Channel metadata (rosbag2 stores `offered_qos_profiles` here).
+    /// Channel metadata (rosbag2 stores `offered_qos_profiles` here; for a ROS 1 bag: `md5sum`,
+    /// `callerid`, `latching`).
     pub metadata: BTreeMap<String, String>,
     /// Messages on the topic, when the bag has statistics.
     pub message_count: Option<u64>,
@@ -52,15 +86,21 @@ pub struct TopicInfo {
 pub struct BagMessage<'a> {
     /// Topic name.
     pub topic: &'a str,
-    /// Message type.
+    /// Message type, as the bag spells it.
     pub type_name: &'a str,
+    /// Message encoding: `cdr` (ROS 2) or `ros1`.
+    pub encoding: &'a str,
+    /// Schema encoding: `ros2msg`, `ros2idl`, `ros1msg`, or empty when the bag has no schema.
+    pub schema_encoding: &'a str,
+    /// The schema (message definition) text.
+    pub schema: &'a [u8],
     /// Receive time in ns.
     pub log_time: u64,
     /// Publish time in ns.
     pub publish_time: u64,
     /// Per-channel sequence number.
     pub sequence: u32,
-    /// The CDR bytes.
+    /// The serialized message, in `encoding`.
     pub data: &'a [u8],
     /// The file the message comes from.
     pub path: &'a Path,
@@ -69,16 +109,22 @@ pub struct BagMessage<'a> {
 /// A decoded sensor message.
 #[derive(Clone, Debug)]
 pub enum SensorMessage<'a> {
-    /// `sensor_msgs/msg/Image`.
+    /// `sensor_msgs/Image`.
     Image(ImageMsg<'a>),
-    /// `sensor_msgs/msg/CompressedImage`.
+    /// `sensor_msgs/CompressedImage`.
     Compressed(CompressedImageMsg<'a>),
-    /// `sensor_msgs/msg/PointCloud2`.
+    /// `sensor_msgs/PointCloud2`.
     Cloud(PointCloud2Msg<'a>),
 }
 
 impl<'a> BagMessage<'a> {
-    /// Decodes an Image, CompressedImage or PointCloud2; `None` for other types.
+    /// True if the message is in ROS 1 serialization (a `.bag`, or ROS 1 profile MCAP).
+    pub fn is_ros1(&self) -> bool {
+        self.encoding == "ros1" || self.encoding == "ros"
+    }
+
+    /// Decodes an Image, CompressedImage or PointCloud2 in either encoding; `None` for other
+    /// types.
     pub fn decode(&self) -> Option<Result<SensorMessage<'a>, BagError>> {
         let wrap = |e| BagError::Message {
             path: self.path.to_path_buf(),
@@ -86,18 +132,38 @@ impl<'a> BagMessage<'a> {
             log_time: self.log_time,
             source: e,
         };
-        Some(match self.type_name {
-            "sensor_msgs/msg/Image" => ImageMsg::decode(self.data)
-                .map(SensorMessage::Image)
-                .map_err(wrap),
-            "sensor_msgs/msg/CompressedImage" => CompressedImageMsg::decode(self.data)
-                .map(SensorMessage::Compressed)
-                .map_err(wrap),
-            "sensor_msgs/msg/PointCloud2" => PointCloud2Msg::decode(self.data)
-                .map(SensorMessage::Cloud)
-                .map_err(wrap),
-            _ => return None,
-        })
+        let ty = SensorType::of(self.type_name)?;
+        let d = self.data;
+        Some(
+            match (ty, self.is_ros1()) {
+                (SensorType::Image, false) => ImageMsg::decode(d).map(SensorMessage::Image),
+                (SensorType::Image, true) => {
+                    ImageMsg::decode_ros1(d).map(|m| SensorMessage::Image(m.1))
+                }
+                (SensorType::CompressedImage, false) => {
+                    CompressedImageMsg::decode(d).map(SensorMessage::Compressed)
+                }
+                (SensorType::CompressedImage, true) => {
+                    CompressedImageMsg::decode_ros1(d).map(|m| SensorMessage::Compressed(m.1))
+                }
+                (SensorType::PointCloud2, false) => {
+                    PointCloud2Msg::decode(d).map(SensorMessage::Cloud)
+                }
+                (SensorType::PointCloud2, true) => {
+                    PointCloud2Msg::decode_ros1(d).map(|m| SensorMessage::Cloud(m.1))
+                }
+            }
+            .map_err(wrap),
+        )
+    }
+
+    /// The header's `seq` of a ROS 1 sensor message (ROS 2 headers have none).
+    pub fn header_seq(&self) -> Option<u32> {
+        if self.is_ros1() && SensorType::of(self.type_name).is_some() {
+            perturb_core::formats::ros1::header_seq(self.data)
+        } else {
+            None
+        }
     }
 }
 
@@ -146,9 +212,11 @@ struct File {
     summary_error: Option<String>,
 }
 
-/// An open bag: one `.mcap` file, or a rosbag2 directory of split `.mcap` files.
+/// An open bag: one `.mcap` file (rosbag2, or the ROS 1 profile), a rosbag2 directory of split
+/// `.mcap` files, or a ROS 1 `.bag` file.
 pub struct Bag {
     files: Vec<File>,
+    ros1: Option<Box<Ros1Bag>>,
 }
 
 impl std::fmt::Debug for Bag {
@@ -156,16 +224,19 @@ impl std::fmt::Debug for Bag {
         f.debug_struct("Bag")
             .field(
                 "files",
-                &self.files.iter().map(|f| &f.path).collect::<Vec<_>>(),
+                &self
+                    .files
+                    .iter()
+                    .map(|f| &f.path)
+                    .chain(self.ros1.as_ref().map(|b| &b.path))
+                    .collect::<Vec<_>>(),
             )
             .finish()
     }
 }
 
-const ROS1_HINT: &str = "this is a ROS 1 recording; convert it to a ROS 2 bag first, e.g. `rosbags-convert --src in.mcap --dst out_dir` (pip install rosbags)";
-
 /// Reads the Header record that follows the magic bytes (its lengths checked first) and returns
-/// the profile.
+/// the profile (`ros2`, `ros1`, ...).
 fn read_header(map: &[u8], path: &Path) -> Result<String, BagError> {
     let damaged = |reason: String| BagError::NotMcap {
         path: path.to_path_buf(),
@@ -244,7 +315,7 @@ fn check_chunk_indexes(summary: &mcap::Summary, file_len: u64) -> Result<(), Str
     Ok(())
 }
 
-fn open_file(path: &Path) -> Result<File, BagError> {
+fn map_file(path: &Path) -> Result<memmap2::Mmap, BagError> {
     let io = |source| BagError::Io {
         path: path.to_path_buf(),
         source,
@@ -252,27 +323,24 @@ fn open_file(path: &Path) -> Result<File, BagError> {
     let f = std::fs::File::open(path).map_err(io)?;
     // SAFETY: the map is read-only and the bag is not expected to change while it is read; a
     // concurrent truncation by another process would be a user error this crate cannot prevent.
-    let map = unsafe { memmap2::Mmap::map(&f) }.map_err(io)?;
+    unsafe { memmap2::Mmap::map(&f) }.map_err(io)
+}
+
+fn open_file(path: &Path, map: memmap2::Mmap) -> Result<File, BagError> {
     file_from_bytes(path, Bytes::Map(map))
 }
 
-/// Checks a file's bytes and reads its header and summary.
+/// Checks a file's bytes and reads its header (whose lengths are checked first, so a damaged
+/// start is reported, not read as an empty bag) and its summary.
 fn file_from_bytes(path: &Path, map: Bytes) -> Result<File, BagError> {
     if map.len() < 8 || &map[..8] != mcap::MAGIC {
         return Err(BagError::NotMcap {
             path: path.to_path_buf(),
-            reason: "the file does not start with the MCAP magic bytes".into(),
+            reason: "the file does not start with the MCAP magic bytes nor `#ROSBAG V2.0`".into(),
         });
     }
-    // The header record names the profile.
-    let profile = read_header(&map, path)?;
-    if profile == "ros1" {
-        return Err(BagError::UnsupportedProfile {
-            path: path.to_path_buf(),
-            profile,
-            hint: ROS1_HINT,
-        });
-    }
+    // The Header record (rosbag2 or ROS 1 profile alike) must be there and whole.
+    read_header(&map, path)?;
     let file_len = map.len() as u64;
     let summary = check_summary(&map).and_then(|()| {
         mcap::Summary::read(&map).map_err(|e| format!("the summary is unreadable ({e})"))
@@ -301,9 +369,19 @@ fn file_from_bytes(path: &Path, map: Bytes) -> Result<File, BagError> {
 }
 
 impl Bag {
-    /// Opens an `.mcap` file or a rosbag2 directory holding `.mcap` files (read in name order,
-    /// which is recording order for split bags).
+    /// Opens an `.mcap` file, a rosbag2 directory holding `.mcap` files (read in name order,
+    /// which is recording order for split bags) or a ROS 1 `.bag` file; the format is told by the
+    /// file's first bytes.
     pub fn open(path: &Path) -> Result<Bag, BagError> {
+        if !path.is_dir() {
+            let map = map_file(path)?;
+            if Ros1Bag::sniff(&map) {
+                return Ok(Bag {
+                    files: Vec::new(),
+                    ros1: Some(Box::new(Ros1Bag::open(path, map)?)),
+                });
+            }
+        }
         let paths = if path.is_dir() {
             let rd = std::fs::read_dir(path).map_err(|source| BagError::Io {
                 path: path.to_path_buf(),
@@ -315,9 +393,24 @@ impl Bag {
                 .collect();
             v.sort();
             if v.is_empty() {
+                // A directory holding one ROS 1 bag (as `perturb apply` and `perturb batch`
+                // write them).
+                let bags: Vec<PathBuf> = std::fs::read_dir(path)
+                    .map_err(|source| BagError::Io {
+                        path: path.to_path_buf(),
+                        source,
+                    })?
+                    .filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| p.extension().is_some_and(|x| x == "bag"))
+                    .collect();
+                if let [one] = &bags[..] {
+                    return Bag::open(one);
+                }
+            }
+            if v.is_empty() {
                 return Err(BagError::NotMcap {
                     path: path.to_path_buf(),
-                    reason: "the directory holds no .mcap file (sqlite3 rosbag2 storage is not supported; re-record with `--storage mcap` or convert with `ros2 bag convert`)".into(),
+                    reason: "the directory holds no .mcap file nor one .bag file (sqlite3 rosbag2 storage is not supported; re-record with `--storage mcap` or convert with `ros2 bag convert`)".into(),
                 });
             }
             v
@@ -326,31 +419,78 @@ impl Bag {
         };
         let files = paths
             .iter()
-            .map(|p| open_file(p))
+            .map(|p| open_file(p, map_file(p)?))
             .collect::<Result<_, _>>()?;
-        Ok(Bag { files })
+        Ok(Bag { files, ros1: None })
     }
 
     /// A one-file bag held in memory; `name` stands for its path in messages.
     pub fn from_bytes(name: &Path, bytes: Vec<u8>) -> Result<Bag, BagError> {
         Ok(Bag {
             files: vec![file_from_bytes(name, Bytes::Owned(bytes))?],
+            ros1: None,
         })
     }
 
     /// The files of the bag.
     pub fn paths(&self) -> Vec<&Path> {
-        self.files.iter().map(|f| f.path.as_path()).collect()
+        self.files
+            .iter()
+            .map(|f| f.path.as_path())
+            .chain(self.ros1.as_ref().map(|b| b.path.as_path()))
+            .collect()
+    }
+
+    /// True for a ROS 1 `.bag` file (its messages are in ROS 1 serialization, as are those of
+    /// ROS 1 profile MCAP files: see [`BagMessage::is_ros1`]).
+    pub fn is_ros1_bag(&self) -> bool {
+        self.ros1.is_some()
+    }
+
+    /// What kind of bag it is: `ROS 1 bag (format 2.0)`, `MCAP (ROS 1 profile)` or
+    /// `rosbag2 MCAP`.
+    pub fn format_name(&self) -> &'static str {
+        if self.ros1.is_some() {
+            "ROS 1 bag (format 2.0)"
+        } else if self.files.iter().any(|f| {
+            f.summary
+                .as_ref()
+                .is_some_and(|s| s.channels.values().any(|c| c.message_encoding == "ros1"))
+        }) {
+            "MCAP (ROS 1 profile)"
+        } else {
+            "rosbag2 MCAP"
+        }
     }
 
     /// True if every file has a usable index (messages come in log-time order).
     pub fn is_indexed(&self) -> bool {
-        self.files.iter().all(|f| f.summary.is_some())
+        match &self.ros1 {
+            Some(b) => b.is_indexed(),
+            None => self.files.iter().all(|f| f.summary.is_some()),
+        }
+    }
+
+    /// Why the bag is read in file order, if it is.
+    pub fn index_problem(&self) -> Option<String> {
+        match &self.ros1 {
+            Some(b) => b
+                .index_error()
+                .map(|e| format!("{}: {e}", b.path.display())),
+            None => self.files.iter().find_map(|f| {
+                f.summary_error
+                    .as_ref()
+                    .map(|e| format!("{}: {e}", f.path.display()))
+            }),
+        }
     }
 
     /// The topics of the bag with their types and, where the bag has statistics, message counts.
     /// For a bag without a summary the topics are collected by scanning it.
     pub fn topics(&self) -> Result<Vec<TopicInfo>, BagError> {
+        if let Some(b) = &self.ros1 {
+            return b.topics();
+        }
         let mut by_topic: BTreeMap<String, TopicInfo> = BTreeMap::new();
         for f in &self.files {
             let mut add = |ch: &mcap::Channel<'_>, count: Option<u64>| {
@@ -419,6 +559,10 @@ impl Bag {
             damage: None,
             notes: Vec::new(),
         };
+        if let Some(b) = &self.ros1 {
+            let _ = b.for_each(filter, &mut f, &mut report)?;
+            return Ok(report);
+        }
         for file in &self.files {
             let flow = match &file.summary {
                 Some(s) => read_indexed(file, s, filter, &mut f, &mut report)?,
@@ -498,17 +642,15 @@ where
                     ));
                     return Ok(ControlFlow::Continue(()));
                 };
-                let type_name = ch.schema.as_ref().map_or("", |s| s.name.as_str());
                 report.delivered += 1;
-                let flow = f(BagMessage {
-                    topic: &ch.topic,
-                    type_name,
-                    log_time: header.log_time,
-                    publish_time: header.publish_time,
-                    sequence: header.sequence,
+                let flow = f(mcap_message(
+                    ch,
+                    &file.path,
+                    header.log_time,
+                    header.publish_time,
+                    header.sequence,
                     data,
-                    path: &file.path,
-                })?;
+                ))?;
                 if flow.is_break() {
                     return Ok(flow);
                 }
@@ -736,17 +878,15 @@ where
         if !filter.accepts(&ch.topic, header.log_time) {
             return Ok(ControlFlow::Continue(()));
         }
-        let type_name = ch.schema.as_ref().map_or("", |s| s.name.as_str());
         report.delivered += 1;
-        f(BagMessage {
-            topic: &ch.topic,
-            type_name,
-            log_time: header.log_time,
-            publish_time: header.publish_time,
-            sequence: header.sequence,
+        f(mcap_message(
+            ch,
+            &file.path,
+            header.log_time,
+            header.publish_time,
+            header.sequence,
             data,
-            path: &file.path,
-        })
+        ))
     })?;
     if flow.is_break() {
         return Ok(flow);
@@ -774,4 +914,30 @@ where
         ));
     }
     Ok(ControlFlow::Continue(()))
+}
+
+/// A message of an MCAP channel.
+fn mcap_message<'a>(
+    ch: &'a mcap::Channel<'_>,
+    path: &'a Path,
+    log_time: u64,
+    publish_time: u64,
+    sequence: u32,
+    data: &'a [u8],
+) -> BagMessage<'a> {
+    let (type_name, schema_encoding, schema) = ch.schema.as_ref().map_or(("", "", &[][..]), |s| {
+        (s.name.as_str(), s.encoding.as_str(), &s.data[..])
+    });
+    BagMessage {
+        topic: &ch.topic,
+        type_name,
+        encoding: &ch.message_encoding,
+        schema_encoding,
+        schema,
+        log_time,
+        publish_time,
+        sequence,
+        data,
+        path,
+    }
 }

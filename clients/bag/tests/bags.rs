@@ -1,5 +1,5 @@
 //! Reading the real rosbag2 MCAP bags in `../shared/data`, writing bags and reading them back,
-//! damaged bags and ROS 1 bags.
+//! damaged bags (ROS 1 bags: `ros1_bags.rs`).
 
 use perturb_bag::{Bag, BagWriter, Compression, Filter, ReadOrder, SensorMessage, WriterOptions};
 use perturb_core::cloud::{Cloud, PointLayout};
@@ -72,19 +72,6 @@ fn reads_the_kitti_bag_in_log_time_order_and_decodes_its_sensors() {
     assert!(
         times.windows(2).all(|w| w[0] <= w[1]),
         "not in log-time order: {times:?}"
-    );
-}
-
-#[test]
-fn refuses_ros1_bags_with_a_conversion_hint() {
-    let Some(data) = shared("refuses_ros1_bags") else {
-        return;
-    };
-    let err = Bag::open(&data.join("mcap_ouster_os1_pointcloudset/test.mcap")).unwrap_err();
-    let msg = err.to_string();
-    assert!(
-        msg.contains("ros1") && msg.contains("rosbags-convert") && msg.contains("test.mcap"),
-        "{msg}"
     );
 }
 

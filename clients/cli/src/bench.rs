@@ -1,10 +1,10 @@
 //! `perturb bench`: latency of every perturbation at every severity on a real frame or scan.
 
-use crate::files::{Loaded, load, sensor_for};
 use anyhow::{Context, Result, bail};
 use perturb_core::bench::{Timing, time_camera, time_lidar};
 use perturb_core::image::resize_bilinear;
 use perturb_core::registry::{Modality, of_modality};
+use perturb_study::files::{Loaded, describe_sensor, load, sensor_for};
 use std::path::PathBuf;
 
 /// Output format of the report.
@@ -175,7 +175,8 @@ pub fn run(a: Args) -> Result<()> {
             }
         }
         (Modality::Lidar, Loaded::Cloud(cloud, kind, _)) => {
-            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max, false)?;
+            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max)?;
+            eprintln!("{}", describe_sensor(&sensor));
             eprintln!(
                 "lidar bench on {} ({} points), {} thread(s)",
                 input.display(),

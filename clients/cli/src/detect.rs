@@ -1,10 +1,10 @@
 //! `perturb detect`: the clustering detector on one point-cloud file.
 
-use crate::files::{Loaded, load};
 use anyhow::{Context, Result, bail};
 use perturb_core::detector::{Detector, DetectorConfig};
 use perturb_core::lidar::{Box3, Points};
 use perturb_core::sensors::SensorModel;
+use perturb_study::files::{Loaded, load};
 use std::path::PathBuf;
 
 /// Arguments of `perturb detect`.

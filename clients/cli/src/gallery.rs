@@ -1,12 +1,11 @@
 //! `perturb gallery`: every perturbation at every severity on one frame or scan, as one picture.
 
-use crate::files::{Loaded, load, save_image, sensor_for};
-use anyhow::{Result, bail};
+use crate::progress::Notes;
+use anyhow::Result;
 use perturb_core::formats::FileKind;
-use perturb_core::perturber::{CameraPerturber, LidarPerturber};
-use perturb_core::registry::{Entry, Modality, of_modality};
-use perturb_core::viz::{Cell, ColorBy, bird_eye_view, contact_sheet};
-use rayon::prelude::*;
+use perturb_core::viz::ColorBy;
+use perturb_study::files::save_image;
+use perturb_study::gallery::GalleryOptions;
 use std::path::PathBuf;
 
 /// Arguments of `perturb gallery`.
@@ -46,105 +45,24 @@ pub struct Args {
     intensity_max: Option<f32>,
 }
 
-fn selected(a: &Args, m: Modality) -> Vec<&'static Entry> {
-    of_modality(m)
-        .filter(|e| e.is_implemented())
-        .filter(|e| a.ids.is_empty() || a.ids.iter().any(|i| i.eq_ignore_ascii_case(e.id)))
-        .collect()
-}
-
 /// Renders the contact sheet.
 pub fn run(a: Args) -> Result<()> {
-    let label = |e: &Entry, s: u8| format!("{} {} S{s}", e.id, e.name);
-    let sheet = match load(&a.input)? {
-        Loaded::Image(img, _) => {
-            let entries = selected(&a, Modality::Camera);
-            if entries.is_empty() {
-                bail!("no camera perturbation selected");
-            }
-            let rows: Vec<Vec<Cell>> = entries
-                .par_iter()
-                .map(|e| {
-                    let mut row = vec![Cell {
-                        image: img.clone(),
-                        label: format!("{} clean", e.id),
-                    }];
-                    for s in e.severities() {
-                        let image = match CameraPerturber::new(e.id, s, a.seed)
-                            .and_then(|mut p| p.apply_owned(&img.view(), a.seq))
-                        {
-                            Ok(out) => out,
-                            Err(err) => {
-                                eprintln!("{} s{s}: {err}", e.id);
-                                continue;
-                            }
-                        };
-                        row.push(Cell {
-                            image,
-                            label: label(e, s),
-                        });
-                    }
-                    row
-                })
-                .collect();
-            contact_sheet(
-                &format!(
-                    "{} - {} camera perturbations",
-                    a.input.display(),
-                    entries.len()
-                ),
-                &rows,
-                a.cell_width,
-            )
-        }
-        Loaded::Cloud(cloud, kind, _) => {
-            let entries = selected(&a, Modality::Lidar);
-            if entries.is_empty() {
-                bail!("no LiDAR perturbation selected");
-            }
-            let sensor = sensor_for(Some(kind), a.sensor.as_deref(), a.intensity_max, false)?;
-            let color = if a.color_by == "intensity" {
-                ColorBy::Intensity
-            } else {
-                ColorBy::Height
-            };
-            let size = a.cell_width.max(64);
-            let bev = |c: &perturb_core::cloud::CloudView<'_>| {
-                bird_eye_view(c, size, a.range, color, sensor.intensity_max, &[])
-            };
-            let clean = bev(&cloud.view());
-            let rows: Vec<Vec<Cell>> = entries
-                .par_iter()
-                .map(|e| {
-                    let mut row = vec![Cell {
-                        image: clean.clone(),
-                        label: format!("{} clean {}", e.id, cloud.len()),
-                    }];
-                    for s in e.severities() {
-                        let out = LidarPerturber::new(e.id, s, a.seed, sensor.clone())
-                            .and_then(|mut p| p.apply_owned(&cloud.view(), a.seq, None));
-                        match out {
-                            Ok(o) => row.push(Cell {
-                                image: bev(&o.view()),
-                                label: format!("{} S{s} {}", e.id, o.len()),
-                            }),
-                            Err(err) => eprintln!("{} s{s}: {err}", e.id),
-                        }
-                    }
-                    row
-                })
-                .collect();
-            contact_sheet(
-                &format!(
-                    "{} - {} lidar perturbations (bev)",
-                    a.input.display(),
-                    entries.len()
-                ),
-                &rows,
-                size,
-            )
-        }
+    let opts = GalleryOptions {
+        input: a.input,
+        ids: a.ids,
+        cell_width: a.cell_width,
+        seed: a.seed,
+        seq: a.seq,
+        color_by: if a.color_by == "intensity" {
+            ColorBy::Intensity
+        } else {
+            ColorBy::Height
+        },
+        range: a.range,
+        sensor: a.sensor,
+        intensity_max: a.intensity_max,
     };
+    let sheet = perturb_study::gallery::render(&opts, &Notes)?;
     save_image(&a.output, &sheet.view(), FileKind::Png)?;
     eprintln!(
         "{}x{} gallery written to {}",

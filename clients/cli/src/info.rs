@@ -1,9 +1,9 @@
 //! `perturb info`.
 
-use crate::files::{Loaded, load};
 use anyhow::{Result, bail};
 use perturb_bag::{Bag, Filter, SensorMessage};
 use perturb_core::formats::FileKind;
+use perturb_study::files::{Loaded, load};
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -48,8 +48,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     let bag = Bag::open(&a.input)?;
     println!(
-        "bag {} ({})",
+        "bag {} ({}, {})",
         a.input.display(),
+        bag.format_name(),
         if bag.is_indexed() {
             "indexed"
         } else {

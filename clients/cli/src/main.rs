@@ -3,23 +3,22 @@
 //! Every subcommand is a thin layer over the library crates: `perturb-core` does the work,
 //! `perturb-bag` reads and writes bags. Errors go to stderr with a non-zero exit status.
 
+mod analyze;
 mod apply;
 mod augment;
 mod batch;
 mod bench;
 mod ctl;
-mod dataset;
 mod demo;
 mod demo_offline;
 mod detect;
-mod files;
 mod gallery;
 mod hil;
 mod info;
-mod lidar_eval;
 mod list;
 mod metrics;
 mod pipeline;
+mod progress;
 
 use clap::{Parser, Subcommand};
 
@@ -55,6 +54,9 @@ enum Command {
     Augment(augment::Args),
     /// The study's metric tables (steering MSE and deviation; LiDAR detection retention and ATE).
     Metrics(metrics::Args),
+    /// The closed loop (RQ3, RQ4): completion, failures, CTE, jitter, coverage of recorded runs;
+    /// transfer analysis; fine-tuned vs baseline.
+    Analyze(Box<analyze::Args>),
     /// Run the LiDAR clustering detector on one point-cloud file and print its boxes.
     Detect(detect::Args),
     /// Show what a file holds (image, point cloud, or a bag's topics) and check that it decodes.
@@ -83,6 +85,7 @@ fn main() {
         Command::Gallery(a) => gallery::run(a),
         Command::Augment(a) => augment::run(a),
         Command::Metrics(a) => metrics::run(a),
+        Command::Analyze(a) => analyze::run(*a),
         Command::Detect(a) => detect::run(a),
         Command::Info(a) => info::run(a),
         Command::Bench(a) => bench::run(a),
@@ -90,7 +93,21 @@ fn main() {
         Command::Ctl(a) => ctl::run(a),
     };
     if let Err(e) = result {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", message(&e));
         std::process::exit(1);
     }
+}
+
+/// The error and its causes on one line, leaving out a cause whose text the message already
+/// holds (library errors include their cause in their own text).
+fn message(e: &anyhow::Error) -> String {
+    let mut msg = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !msg.contains(&c) {
+            msg.push_str(": ");
+            msg.push_str(&c);
+        }
+    }
+    msg
 }

@@ -197,9 +197,11 @@ fn streams_of(source: &Source) -> Result<Vec<(String, Modality)>> {
     let b = perturb_bag::Bag::open(bag)?;
     let mut v = Vec::new();
     for t in b.topics()? {
-        let m = match t.type_name.as_str() {
-            "sensor_msgs/msg/Image" | "sensor_msgs/msg/CompressedImage" => Modality::Camera,
-            "sensor_msgs/msg/PointCloud2" => Modality::Lidar,
+        let m = match perturb_bag::SensorType::of(&t.type_name) {
+            Some(perturb_bag::SensorType::Image | perturb_bag::SensorType::CompressedImage) => {
+                Modality::Camera
+            }
+            Some(perturb_bag::SensorType::PointCloud2) => Modality::Lidar,
             _ => continue,
         };
         v.push((stream_name(&t.topic), m));

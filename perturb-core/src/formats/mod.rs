@@ -12,12 +12,14 @@
 //! | KITTI object labels and calibration (`label_2`, `calib`) | [`kitti_labels`] |
 //! | PCD v0.7 (ascii, binary, binary_compressed; any fields) | [`pcd`] |
 //! | `sensor_msgs/Image`, `CompressedImage`, `PointCloud2` in CDR | [`ros`] |
+//! | the same, `std_msgs/String` and `rosgraph_msgs/Clock` in ROS 1 serialization | [`ros1`] |
 
 pub mod kitti;
 pub mod kitti_labels;
 pub mod pcd;
 pub mod picture;
 pub mod ros;
+pub mod ros1;
 
 use crate::error::{Error, Result};
 
@@ -34,7 +36,8 @@ pub enum FileKind {
     NuscenesBin,
     /// `.pcd`
     Pcd,
-    /// A rosbag2 MCAP file (handled by the bag crate).
+    /// A bag, handled by the bag crate: `.mcap` (rosbag2, or the ROS 1 profile) or a ROS 1
+    /// `.bag` (format 2.0).
     Mcap,
 }
 
@@ -56,12 +59,12 @@ impl FileKind {
             FileKind::Png
         } else if name.ends_with(".jpg") || name.ends_with(".jpeg") {
             FileKind::Jpeg
-        } else if name.ends_with(".mcap") {
+        } else if name.ends_with(".mcap") || name.ends_with(".bag") {
             FileKind::Mcap
         } else {
             return Err(Error::InvalidConfig {
                 reason: format!(
-                    "cannot tell the format of `{}` from its extension (known: .png .jpg .jpeg .bin .pcd.bin .pcd .mcap)",
+                    "cannot tell the format of `{}` from its extension (known: .png .jpg .jpeg .bin .pcd.bin .pcd .mcap .bag)",
                     path.display()
                 ),
             });

@@ -1,6 +1,6 @@
 //! Datasets for the batch commands: a folder of images, a folder of point-cloud files, or a bag.
 
-use anyhow::{Context, Result, bail};
+use crate::error::{Result, StudyError};
 use perturb_core::formats::FileKind;
 use perturb_core::registry::Modality;
 use std::path::{Path, PathBuf};
@@ -32,7 +32,7 @@ fn is_bag_dir(p: &Path) -> bool {
 
 fn walk(root: &Path, dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     let mut entries: Vec<_> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read {}", dir.display()))?
+        .map_err(StudyError::io(dir))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .collect();
     entries.sort();
@@ -53,13 +53,13 @@ impl Dataset {
             if FileKind::from_path(path)? == FileKind::Mcap {
                 return Ok(Dataset::Bag(path.to_path_buf()));
             }
-            bail!(
-                "{} is a single file; use `perturb apply` for one file, or give a folder or a bag",
-                path.display()
-            );
+            return Err(StudyError::input(
+                path,
+                "is a single file; use `perturb apply` for one file, or give a folder or a bag",
+            ));
         }
         if !path.is_dir() {
-            bail!("{} does not exist", path.display());
+            return Err(StudyError::input(path, "does not exist"));
         }
         if is_bag_dir(path) {
             return Ok(Dataset::Bag(path.to_path_buf()));
@@ -67,10 +67,10 @@ impl Dataset {
         let mut files = Vec::new();
         walk(path, path, &mut files)?;
         if files.is_empty() {
-            bail!(
-                "{} holds no image (.png .jpg) or point-cloud (.bin .pcd .pcd.bin) file",
-                path.display()
-            );
+            return Err(StudyError::input(
+                path,
+                "holds no image (.png .jpg) or point-cloud (.bin .pcd .pcd.bin) file",
+            ));
         }
         let kinds: Vec<bool> = files
             .iter()
@@ -82,11 +82,13 @@ impl Dataset {
             .collect();
         let images = kinds.iter().filter(|&&b| b).count();
         if images != 0 && images != files.len() {
-            bail!(
-                "{} mixes images ({images}) and point clouds ({}); give one modality per folder",
-                path.display(),
-                files.len() - images
-            );
+            return Err(StudyError::input(
+                path,
+                format!(
+                    "mixes images ({images}) and point clouds ({}); give one modality per folder",
+                    files.len() - images
+                ),
+            ));
         }
         Ok(Dataset::Files {
             root: path.to_path_buf(),

@@ -13,9 +13,9 @@
 //! pooling runs in frame order afterwards, so the numbers do not depend on the thread count.
 
 use crate::dataset::Dataset;
+use crate::error::{Result, StudyError};
 use crate::files::{Loaded, load};
-use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
+use crate::progress::Progress;
 use perturb_bag::{Bag, Filter, SensorMessage};
 use perturb_core::detector::{Detector, DetectorConfig};
 use perturb_core::lidar::{Box3, Points};
@@ -30,7 +30,7 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 /// Output format of a metrics table.
-pub use crate::metrics::Format;
+pub use crate::Format;
 
 /// Bag clouds decoded and then detected together (in parallel) at a time.
 const BAG_CHUNK: usize = 16;
@@ -49,8 +49,6 @@ pub struct EvalConfig {
     pub sensor: SensorModel,
     /// Bags: only these PointCloud2 topics (all when empty).
     pub topics: Vec<String>,
-    /// Hide the progress bar.
-    pub quiet: bool,
 }
 
 impl EvalConfig {
@@ -62,10 +60,11 @@ impl EvalConfig {
         match_distance: f32,
         sensor: Option<&str>,
         topics: Vec<String>,
-        quiet: bool,
     ) -> Result<Self> {
         if !(match_distance.is_finite() && match_distance > 0.0) {
-            bail!("--match-distance must be a positive number of metres, not {match_distance}");
+            return Err(StudyError::Config(format!(
+                "--match-distance must be a positive number of metres, not {match_distance}"
+            )));
         }
         Ok(EvalConfig {
             detector: if objects {
@@ -82,7 +81,6 @@ impl EvalConfig {
                 None => SensorModel::default(),
             },
             topics,
-            quiet,
         })
     }
 }
@@ -110,10 +108,12 @@ impl Source {
                 files,
                 modality: Modality::Lidar,
             } => Source::Files { root, files },
-            Dataset::Files { .. } => bail!(
-                "{} holds images; the LiDAR metrics need point clouds (.bin .pcd .pcd.bin) or a bag",
-                path.display()
-            ),
+            Dataset::Files { .. } => {
+                return Err(StudyError::input(
+                    path,
+                    "holds images; the LiDAR metrics need point clouds (.bin .pcd .pcd.bin) or a bag",
+                ));
+            }
             Dataset::Bag(p) => Source::Bag(p),
         })
     }
@@ -136,14 +136,15 @@ pub type FrameBoxes = Vec<(String, Vec<Box3>)>;
 
 fn points_of_file(path: &Path, sensor: &SensorModel) -> Result<Points> {
     match load(path)? {
-        Loaded::Cloud(c, _, _) => Points::extract(&c.view(), sensor, false)
-            .with_context(|| format!("reading the points of {}", path.display())),
-        Loaded::Image(..) => bail!("{} is an image, not a point cloud", path.display()),
+        Loaded::Cloud(c, _, _) => Points::extract(&c.view(), sensor, false).map_err(
+            StudyError::perturb(format!("reading the points of {}", path.display())),
+        ),
+        Loaded::Image(..) => Err(StudyError::input(path, "is an image, not a point cloud")),
     }
 }
 
 /// Runs the detector on every frame of `source`.
-pub fn detect_source(source: &Source, cfg: &EvalConfig, pb: &ProgressBar) -> Result<FrameBoxes> {
+pub fn detect_source(source: &Source, cfg: &EvalConfig, pb: &dyn Progress) -> Result<FrameBoxes> {
     match source {
         Source::Files { root, files } => files
             .par_iter()
@@ -152,10 +153,10 @@ pub fn detect_source(source: &Source, cfg: &EvalConfig, pb: &ProgressBar) -> Res
                 |det, rel| {
                     let path = root.join(rel);
                     if !path.exists() {
-                        bail!(
-                            "{} is missing (the set is incomplete; rerun `perturb batch` to finish it)",
-                            path.display()
-                        );
+                        return Err(StudyError::input(
+                            &path,
+                            "is missing (the set is incomplete; rerun `perturb batch` to finish it)",
+                        ));
                     }
                     let p = points_of_file(&path, &cfg.sensor)?;
                     let boxes = det.detect(&p);
@@ -168,8 +169,8 @@ pub fn detect_source(source: &Source, cfg: &EvalConfig, pb: &ProgressBar) -> Res
     }
 }
 
-fn detect_bag(path: &Path, cfg: &EvalConfig, pb: &ProgressBar) -> Result<FrameBoxes> {
-    let bag = Bag::open(path).with_context(|| format!("opening the bag {}", path.display()))?;
+fn detect_bag(path: &Path, cfg: &EvalConfig, pb: &dyn Progress) -> Result<FrameBoxes> {
+    let bag = Bag::open(path)?;
     let mut out: FrameBoxes = Vec::new();
     let mut chunk: Vec<(String, Points)> = Vec::with_capacity(BAG_CHUNK);
     let mut index: HashMap<String, u64> = HashMap::new();
@@ -190,7 +191,7 @@ fn detect_bag(path: &Path, cfg: &EvalConfig, pb: &ProgressBar) -> Result<FrameBo
         ..Filter::default()
     };
     let report = bag.for_each(&filter, |m| {
-        if m.type_name != "sensor_msgs/msg/PointCloud2" {
+        if perturb_bag::SensorType::of(m.type_name) != Some(perturb_bag::SensorType::PointCloud2) {
             return Ok(ControlFlow::Continue(()));
         }
         let Some(Ok(SensorMessage::Cloud(pc))) = m.decode() else {
@@ -222,9 +223,29 @@ fn detect_bag(path: &Path, cfg: &EvalConfig, pb: &ProgressBar) -> Result<FrameBo
     })?;
     flush(&mut chunk, &mut out);
     if let Some(d) = report.damage {
-        bail!("the bag {} is damaged: {d}", path.display());
+        return Err(StudyError::input(path, format!("the bag is damaged: {d}")));
     }
     Ok(out)
+}
+
+/// The clean data recorded as the input of `perturb batch` in `ROOT/batch.json`.
+pub fn clean_from_manifest(root: &Path) -> Result<PathBuf> {
+    let path = root.join("batch.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        StudyError::input(
+            &path,
+            format!("cannot read it to find the clean data ({e}); give it with --clean"),
+        )
+    })?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| StudyError::input(&path, format!("is not JSON ({e})")))?;
+    match v.get("input").and_then(|i| i.as_str()) {
+        Some(i) => Ok(PathBuf::from(i)),
+        None => Err(StudyError::input(
+            &path,
+            "records no input; give the clean data with --clean",
+        )),
+    }
 }
 
 /// One perturbed set found under a batch output root.
@@ -239,12 +260,12 @@ pub struct SetDir {
 }
 
 /// The finished LiDAR sets under `root` (`<ID>_<name>/s<N>/` with a `.done` marker), in catalogue
-/// and severity order. Unfinished sets are skipped with a warning; camera sets are ignored.
-pub fn discover_sets(root: &Path) -> Result<Vec<SetDir>> {
+/// and severity order. Unfinished sets are skipped with a note; camera sets are ignored.
+pub fn discover_sets(root: &Path, progress: &dyn Progress) -> Result<Vec<SetDir>> {
     let mut sets = Vec::new();
-    let rd = std::fs::read_dir(root).with_context(|| format!("cannot read {}", root.display()))?;
+    let rd = std::fs::read_dir(root).map_err(StudyError::io(root))?;
     for e in rd {
-        let dir = e?.path();
+        let dir = e.map_err(StudyError::io(root))?.path();
         if !dir.is_dir() {
             continue;
         }
@@ -262,10 +283,8 @@ pub fn discover_sets(root: &Path) -> Result<Vec<SetDir>> {
         if entry.modality != Modality::Lidar {
             continue;
         }
-        for s in
-            std::fs::read_dir(&dir).with_context(|| format!("cannot read {}", dir.display()))?
-        {
-            let sdir = s?.path();
+        for s in std::fs::read_dir(&dir).map_err(StudyError::io(&dir))? {
+            let sdir = s.map_err(StudyError::io(&dir))?.path();
             let Some(severity) = sdir
                 .file_name()
                 .and_then(|n| n.to_str())
@@ -278,10 +297,10 @@ pub fn discover_sets(root: &Path) -> Result<Vec<SetDir>> {
                 continue;
             }
             if !sdir.join(".done").exists() {
-                eprintln!(
+                progress.note(&format!(
                     "skipping {}: unfinished (no .done marker; rerun `perturb batch` to finish it)",
                     sdir.display()
-                );
+                ));
                 continue;
             }
             sets.push(SetDir {
@@ -349,27 +368,12 @@ pub struct Report {
     pub per_perturbation: Vec<PerturbationSummary>,
 }
 
-fn progress(total: u64, quiet: bool) -> ProgressBar {
-    if quiet {
-        return ProgressBar::hidden();
-    }
-    let pb = ProgressBar::new(total);
-    pb.set_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} clouds detected {msg}",
-        )
-        .expect("template")
-        .progress_chars("=> "),
-    );
-    pb
-}
-
 /// Pools the per-frame metrics of a set against the clean boxes, in the clean frame order.
 pub fn compare(
     clean: &FrameBoxes,
     perturbed: &FrameBoxes,
     m: &MatchConfig,
-) -> Result<DetectionMetrics> {
+) -> std::result::Result<DetectionMetrics, String> {
     let index: HashMap<&str, &Vec<Box3>> = perturbed.iter().map(|(k, b)| (k.as_str(), b)).collect();
     let mut total = DetectionMetrics {
         retention: 1.0,
@@ -377,43 +381,50 @@ pub fn compare(
     };
     for (key, base) in clean {
         let Some(p) = index.get(key.as_str()) else {
-            bail!("frame `{key}` of the clean data has no perturbed counterpart");
+            return Err(format!(
+                "frame `{key}` of the clean data has no perturbed counterpart"
+            ));
         };
         total.add(&detection_metrics(base, p, m));
     }
     Ok(total)
 }
 
-/// Detects on the clean data and on every set, and computes the metrics.
-pub fn evaluate(clean_path: &Path, sets: &[SetDir], cfg: &EvalConfig) -> Result<Report> {
+/// Detects on the clean data and on every set, and computes the metrics (frames in parallel on
+/// the current rayon pool; progress counts clouds).
+pub fn evaluate(
+    clean_path: &Path,
+    sets: &[SetDir],
+    cfg: &EvalConfig,
+    pb: &dyn Progress,
+) -> Result<Report> {
     if sets.is_empty() {
-        bail!("no finished LiDAR set to evaluate");
+        return Err(StudyError::Config(
+            "no finished LiDAR set to evaluate".into(),
+        ));
     }
     let clean = Source::open(clean_path)?;
     let frames_hint = match &clean {
         Source::Files { files, .. } => files.len() as u64,
         Source::Bag(_) => 0,
     };
-    let pb = progress(frames_hint * (sets.len() as u64 + 1), cfg.quiet);
-    pb.set_message("clean".to_string());
-    let base = detect_source(&clean, cfg, &pb)
-        .with_context(|| format!("detecting on the clean data {}", clean_path.display()))?;
+    pb.set_length(frames_hint * (sets.len() as u64 + 1));
+    pb.set_message("clean");
+    let base = detect_source(&clean, cfg, pb)?;
     if base.is_empty() {
-        bail!("{} holds no point cloud", clean_path.display());
+        return Err(StudyError::input(clean_path, "holds no point cloud"));
     }
     if frames_hint == 0 {
         pb.set_length(base.len() as u64 * (sets.len() as u64 + 1));
     }
     let mut per_severity = Vec::new();
     for set in sets {
-        pb.set_message(format!("{} s{}", set.entry.id, set.severity));
-        let pert = detect_source(&clean.in_set(&set.dir), cfg, &pb)
-            .with_context(|| format!("detecting on {}", set.dir.display()))?;
-        let m = compare(&base, &pert, &cfg.matching).with_context(|| {
-            format!(
-                "comparing {} with {}",
-                set.dir.display(),
-                clean_path.display()
+        pb.set_message(&format!("{} s{}", set.entry.id, set.severity));
+        let pert = detect_source(&clean.in_set(&set.dir), cfg, pb)?;
+        let m = compare(&base, &pert, &cfg.matching).map_err(|reason| {
+            StudyError::input(
+                &set.dir,
+                format!("comparing with {}: {reason}", clean_path.display()),
             )
         })?;
         per_severity.push(SetMetrics {
@@ -424,7 +435,7 @@ pub fn evaluate(clean_path: &Path, sets: &[SetDir], cfg: &EvalConfig) -> Result<
             m,
         });
     }
-    pb.finish_and_clear();
+    pb.finish();
     let mut per_perturbation: Vec<PerturbationSummary> = Vec::new();
     for r in &per_severity {
         if per_perturbation.last().is_none_or(|p| p.id != r.id) {
@@ -457,7 +468,7 @@ fn ate(v: Option<f64>) -> String {
 }
 
 /// The report in `format`.
-pub fn render(r: &Report, format: Format) -> Result<String> {
+pub fn render(r: &Report, format: Format) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let per_sev = |id: &str, md: bool| -> String {
@@ -475,14 +486,14 @@ pub fn render(r: &Report, format: Format) -> Result<String> {
             .join(if md { ", " } else { "  " })
     };
     match format {
-        Format::Json => s = serde_json::to_string_pretty(r)? + "\n",
+        Format::Json => s = serde_json::to_string_pretty(r).expect("the report serialises") + "\n",
         Format::Csv => {
-            writeln!(
+            let _ = writeln!(
                 s,
                 "id,name,severity,frames,baseline,retained,retention,ate_m"
-            )?;
+            );
             for x in &r.per_severity {
-                writeln!(
+                let _ = writeln!(
                     s,
                     "{},{},{},{},{},{},{},{}",
                     x.id,
@@ -493,11 +504,11 @@ pub fn render(r: &Report, format: Format) -> Result<String> {
                     x.m.retained,
                     x.m.retention,
                     x.m.ate.map_or(String::new(), |a| a.to_string())
-                )?;
+                );
             }
         }
         Format::Markdown => {
-            writeln!(
+            let _ = writeln!(
                 s,
                 "LiDAR detection metrics: {} of `{}`, {} baseline detections (detector `{}`, match within {} m)\n",
                 frames(r.frames),
@@ -505,13 +516,13 @@ pub fn render(r: &Report, format: Format) -> Result<String> {
                 r.baseline_detections,
                 r.detector,
                 r.match_distance_m
-            )?;
-            writeln!(
+            );
+            let _ = writeln!(
                 s,
                 "| id | name | avg retention | min retention | max ATE (m) | retention / ATE per severity |\n|---|---|---:|---:|---:|---|"
-            )?;
+            );
             for p in &r.per_perturbation {
-                writeln!(
+                let _ = writeln!(
                     s,
                     "| {} | {} | {:.3} | {:.3} | {} | {} |",
                     p.id,
@@ -520,11 +531,11 @@ pub fn render(r: &Report, format: Format) -> Result<String> {
                     p.s.min_retention,
                     ate(p.s.max_ate),
                     per_sev(p.id, true)
-                )?;
+                );
             }
         }
         Format::Table => {
-            writeln!(
+            let _ = writeln!(
                 s,
                 "{} of {}, {} baseline detections (detector {}, match within {} m)",
                 frames(r.frames),
@@ -532,14 +543,14 @@ pub fn render(r: &Report, format: Format) -> Result<String> {
                 r.baseline_detections,
                 r.detector,
                 r.match_distance_m
-            )?;
-            writeln!(
+            );
+            let _ = writeln!(
                 s,
                 "{:<7} {:<26} {:>8} {:>8} {:>8}  retention/ATE per severity",
                 "id", "name", "avg_ret", "min_ret", "max_ate"
-            )?;
+            );
             for p in &r.per_perturbation {
-                writeln!(
+                let _ = writeln!(
                     s,
                     "{:<7} {:<26} {:>8.3} {:>8.3} {:>8}  {}",
                     p.id,
@@ -548,9 +559,9 @@ pub fn render(r: &Report, format: Format) -> Result<String> {
                     p.s.min_retention,
                     ate(p.s.max_ate),
                     per_sev(p.id, false)
-                )?;
+                );
             }
         }
     }
-    Ok(s)
+    s
 }

@@ -1,6 +1,6 @@
 //! Reading and writing the file formats, with the file name in every error.
 
-use anyhow::{Context, Result, bail};
+use crate::error::{Result, StudyError};
 use perturb_core::cloud::{Cloud, CloudView};
 use perturb_core::formats::{FileKind, kitti, pcd, picture};
 use perturb_core::image::{Image, ImageView};
@@ -15,31 +15,32 @@ pub enum Loaded {
     Cloud(Cloud, FileKind, Option<(pcd::PcdData, [f64; 7])>),
 }
 
+/// The kind of file `path` is, from its name.
+pub fn kind_of(path: &Path) -> Result<FileKind> {
+    Ok(FileKind::from_path(path)?)
+}
+
 /// Reads and decodes an image or point-cloud file.
 pub fn load(path: &Path) -> Result<Loaded> {
-    let kind = FileKind::from_path(path)?;
+    let kind = kind_of(path)?;
     if kind == FileKind::Mcap {
-        bail!(
-            "{} is a bag; this operation needs an image or point-cloud file",
-            path.display()
-        );
+        return Err(StudyError::input(
+            path,
+            "is a bag; this operation needs an image or point-cloud file",
+        ));
     }
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let ctx = || format!("{}", path.display());
+    let bytes = std::fs::read(path).map_err(StudyError::io(path))?;
+    let bad = |e: perturb_core::Error| StudyError::input(path, e.to_string());
     Ok(match kind {
         FileKind::Png | FileKind::Jpeg => {
-            Loaded::Image(picture::decode(&bytes).with_context(ctx)?, kind)
+            Loaded::Image(picture::decode(&bytes).map_err(bad)?, kind)
         }
-        FileKind::KittiBin => {
-            Loaded::Cloud(kitti::decode_kitti(&bytes).with_context(ctx)?, kind, None)
+        FileKind::KittiBin => Loaded::Cloud(kitti::decode_kitti(&bytes).map_err(bad)?, kind, None),
+        FileKind::NuscenesBin => {
+            Loaded::Cloud(kitti::decode_nuscenes(&bytes).map_err(bad)?, kind, None)
         }
-        FileKind::NuscenesBin => Loaded::Cloud(
-            kitti::decode_nuscenes(&bytes).with_context(ctx)?,
-            kind,
-            None,
-        ),
         FileKind::Pcd => {
-            let f = pcd::decode(&bytes).with_context(ctx)?;
+            let f = pcd::decode(&bytes).map_err(bad)?;
             Loaded::Cloud(f.cloud, kind, Some((f.data, f.viewpoint)))
         }
         FileKind::Mcap => unreachable!("handled above"),
@@ -49,10 +50,11 @@ pub fn load(path: &Path) -> Result<Loaded> {
 /// Encodes and writes an image in `kind`'s format.
 pub fn save_image(path: &Path, img: &ImageView<'_>, kind: FileKind) -> Result<()> {
     let bytes = match kind {
-        FileKind::Jpeg => picture::encode_jpeg(img, 95)?,
-        _ => picture::encode_png(img)?,
-    };
-    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+        FileKind::Jpeg => picture::encode_jpeg(img, 95),
+        _ => picture::encode_png(img),
+    }
+    .map_err(StudyError::perturb(format!("encoding {}", path.display())))?;
+    std::fs::write(path, bytes).map_err(StudyError::io(path))
 }
 
 /// Encodes and writes a cloud in `kind`'s format (PCD keeps its data encoding and viewpoint).
@@ -63,25 +65,26 @@ pub fn save_cloud(
     pcd_meta: Option<(pcd::PcdData, [f64; 7])>,
 ) -> Result<()> {
     let bytes = match kind {
-        FileKind::KittiBin => kitti::encode_kitti(cloud)?,
-        FileKind::NuscenesBin => kitti::encode_nuscenes(cloud)?,
+        FileKind::KittiBin => kitti::encode_kitti(cloud),
+        FileKind::NuscenesBin => kitti::encode_nuscenes(cloud),
         _ => {
             let (data, vp) =
                 pcd_meta.unwrap_or((pcd::PcdData::Binary, [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]));
-            pcd::encode(cloud, data, vp)?
+            pcd::encode(cloud, data, vp)
         }
-    };
-    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+    }
+    .map_err(StudyError::perturb(format!("encoding {}", path.display())))?;
+    std::fs::write(path, bytes).map_err(StudyError::io(path))
 }
 
-/// The sensor model for a cloud file: `--sensor` if given, else HDL-64E for KITTI `.bin` files
+/// The sensor model for a cloud file: `sensor` if given, else HDL-64E for KITTI `.bin` files
 /// (KITTI's sensor, reflectance 0..1) and VLP-32C (intensity 0..255) for everything else;
-/// `--intensity-max` overrides the intensity scale. The choice is printed, never silent.
+/// `intensity_max` overrides the intensity scale. [`describe_sensor`] says which one it is, for
+/// the user.
 pub fn sensor_for(
     kind: Option<FileKind>,
     sensor: Option<&str>,
     intensity_max: Option<f32>,
-    quiet: bool,
 ) -> Result<SensorModel> {
     let mut m = match sensor {
         Some(name) => SensorModel::by_name(name)?,
@@ -90,15 +93,19 @@ pub fn sensor_for(
     };
     if let Some(max) = intensity_max {
         if max != 1.0 && max != 255.0 {
-            bail!("--intensity-max must be 1 or 255, not {max}");
+            return Err(StudyError::Config(format!(
+                "--intensity-max must be 1 or 255, not {max}"
+            )));
         }
         m = m.with_intensity_max(max);
     }
-    if !quiet {
-        eprintln!(
-            "sensor model {} (intensity full scale {}); change with --sensor / --intensity-max",
-            m.name, m.intensity_max
-        );
-    }
     Ok(m)
+}
+
+/// The line telling the user which sensor model reads the clouds.
+pub fn describe_sensor(m: &SensorModel) -> String {
+    format!(
+        "sensor model {} (intensity full scale {}); change with --sensor / --intensity-max",
+        m.name, m.intensity_max
+    )
 }

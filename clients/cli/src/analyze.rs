@@ -1,0 +1,561 @@
+//! `perturb analyze`: the closed-loop half of the study from recorded runs; `perturb analyze
+//! transfer` (offline vs closed-loop) and `perturb analyze compare` (fine-tuned vs baseline).
+
+use crate::metrics::Format;
+use anyhow::{Context, Result, bail};
+use perturb_study::analyze::{
+    Aggregate, AnalyzeConfig, JitterUnit, ObjectsConfig, ObjectsFrame, TopicField,
+    render_conditions, render_perturbations, render_runs, render_segments,
+};
+use perturb_study::route::Route;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `perturb analyze`.
+#[derive(clap::Args)]
+#[command(
+    args_conflicts_with_subcommands = true,
+    subcommand_negates_reqs = true,
+    after_help = "Reads every run (a rosbag2 MCAP bag: a .mcap file or a rosbag2 folder) in RUNS_DIR and one
+folder down (the sub-folder's name is the run's group, e.g. a weather condition). Each run's
+/perturb/events channel says which perturbation and severity was active; a run whose condition
+changes is split into segments (\"nominal\" = no perturbation). Topics are decoded by the schema
+stored in the bag, so any message type works; fields are paths like pose.pose.position or
+drive.steering_angle.
+
+Per run, per segment, per (perturbation, severity) and per perturbation (the paper's RQ3 table):
+  completion   share of the route length reached before the end or the failure (needs --route)
+  failure      collision, takeover (signals), understeer / oversteer / road_departure (CTE over
+               --cte-threshold, by the route's curvature there), erratic_start (an oscillation
+               over --erratic-threshold before --erratic-distance m), timeout, incomplete
+  cte_avg/max  |lateral distance| to the route; a failing run leaves out its last --cte-exclude m
+  jitter_*     mean, max, std of |change between consecutive steering commands|
+  coverage_5m  share of (objects message, known vehicle within --near-field m) pairs detected
+  duration_s   seconds to the end or the failure
+Per perturbation, trajectory metrics average the non-failing runs (--aggregate all: every run).
+Definitions and choices: docs/study.md. A run that cannot be analysed is reported on stderr with
+its name and the topic or field at fault, the others are still analysed, and the exit status is 1.
+
+Examples:
+  perturb analyze runs/ --route route.csv --pose-topic /localization/odometry \\
+      --steering-topic /control/command --steering-field drive.steering_angle --out study/
+  perturb analyze runs/ --route route.csv --pose-topic /pose --objects-topic /detection/objects \\
+      --vehicles parked_cars.csv --collision-topic /safety/collision --json > closed_loop.json
+  perturb analyze transfer --offline lidar_metrics.json --closed-loop closed_loop.json
+  perturb analyze compare --set fine-tuned=ft_runs/ --set baseline=base_runs/ --route route.csv \\
+      --pose-topic /pose --steering-topic /cmd"
+)]
+pub struct Args {
+    #[command(subcommand)]
+    command: Option<Command>,
+    /// Folder of recorded runs (or one bag).
+    #[arg(value_name = "RUNS_DIR", required = true)]
+    runs: Option<PathBuf>,
+    #[command(flatten)]
+    run: RunArgs,
+    /// Write every table (markdown and CSV), analysis.json, hotspots and map.png into this folder.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print the whole analysis as JSON (runs, segments, conditions, perturbations, hotspots,
+    /// errors) instead of tables.
+    #[arg(long)]
+    json: bool,
+    /// Format of the tables printed.
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    format: Format,
+    /// Tables to print (repeatable; default: runs, conditions, perturbations, hotspots).
+    #[arg(long, value_enum)]
+    table: Vec<TableKind>,
+    /// Hotspots: DBSCAN radius in metres.
+    #[arg(long, default_value_t = 10.0)]
+    eps: f64,
+    /// Hotspots: failures within --eps that make a hotspot (the failure itself included).
+    #[arg(long, default_value_t = 2)]
+    min_points: usize,
+    /// Write the trajectory map here (default OUT/map.png with --out).
+    #[arg(long)]
+    map: Option<PathBuf>,
+    /// Width of the map in pixels.
+    #[arg(long, default_value_t = 1200)]
+    map_width: u32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum TableKind {
+    Runs,
+    Segments,
+    Conditions,
+    Perturbations,
+    Hotspots,
+}
+
+#[derive(clap::Subcommand)]
+enum Command {
+    /// Transfer analysis: Spearman's rho between offline and closed-loop metrics, bootstrap CIs,
+    /// Benjamini-Hochberg q-values, top-k overlap.
+    #[command(
+        after_help = "Tables: the JSON of `perturb metrics steering|lidar --format json` or of
+`perturb analyze --json` (or OUT/analysis.json), or a CSV with `id` (or `perturbation`),
+`severity` and metric columns. Rows are matched by (perturbation, severity); nominal rows are
+left out. `retention` also gives `retention_loss` = 1 - retention.
+
+For each (offline metric, closed-loop metric): n matched pairs, Spearman's rho (ties get
+average ranks), its two-sided p-value (t with n - 2 degrees of freedom, as scipy.stats.spearmanr),
+a percentile bootstrap CI (pairs resampled with replacement --resamples times from --seed;
+resamples with a constant side are skipped), the Benjamini-Hochberg q-value across all tested
+metric pairs, and the overlap of the top --top-k pairs of the two rankings (larger is worse,
+except retention, completion and coverage_5m).
+
+Defaults: offline mse, max_abs_deviation, retention_loss, ate; closed-loop failure_rate,
+cte_avg, jitter_avg, coverage_5m, completion (those present in the tables)."
+    )]
+    Transfer(TransferArgs),
+    /// Fine-tuned vs baseline (RQ4): two or more sets of runs per condition in one table.
+    #[command(
+        after_help = "Each --set NAME=DIR is a folder of runs; a run's condition is the sub-folder
+it is in (DIR/mud/run1.mcap: `mud`), or the perturbation active through it for runs directly in
+DIR. Per (condition, set): completion and failure type of every run, CTE and jitter averaged
+over every run (failing ones up to the failure, as the paper's RQ4 table; --aggregate
+non-failing to leave failing runs out).
+
+Example:
+  perturb analyze compare --set FT=ft/ --set Non-FT=baseline/ --route route.csv \\
+      --pose-topic /odom --steering-topic /cmd --format markdown"
+    )]
+    Compare(Box<CompareArgs>),
+}
+
+/// How runs are read and judged (shared by `analyze` and `analyze compare`).
+#[derive(clap::Args)]
+struct RunArgs {
+    /// Reference route: a CSV with columns x,y in the pose frame.
+    #[arg(long)]
+    route: Option<PathBuf>,
+    /// Pose topic (geometry_msgs/PoseStamped, nav_msgs/Odometry, ...).
+    #[arg(long)]
+    pose_topic: Option<String>,
+    /// Path of the position in the pose messages (x and y below it; default by type, e.g.
+    /// pose.pose.position for Odometry).
+    #[arg(long)]
+    pose_field: Option<String>,
+    /// Steering command topic.
+    #[arg(long)]
+    steering_topic: Option<String>,
+    /// Path of the steering angle (default by type: drive.steering_angle for
+    /// AckermannDriveStamped, data for Float32/64, ...).
+    #[arg(long)]
+    steering_field: Option<String>,
+    /// Detected objects topic (near-field coverage).
+    #[arg(long)]
+    objects_topic: Option<String>,
+    /// Path of the objects array (default by type: objects, detections, markers, poses).
+    #[arg(long)]
+    objects_array: Option<String>,
+    /// Path of an object's position inside an array element (default by type, e.g.
+    /// pose.position, bbox.center.position).
+    #[arg(long)]
+    object_position: Option<String>,
+    /// Frame of the object positions: ego (relative to the vehicle) or map (the pose frame).
+    #[arg(long, value_enum, default_value_t = FrameArg::Ego)]
+    objects_frame: FrameArg,
+    /// Known vehicles to be detected: CSV x,y in the pose frame (default: the vehicles seen
+    /// within the near field in the nominal segments).
+    #[arg(long)]
+    vehicles: Option<PathBuf>,
+    /// Takeover/disengagement topic: a failure at the first message whose field is true.
+    #[arg(long)]
+    takeover_topic: Option<String>,
+    /// Field of the takeover topic (default: data for std_msgs; none: any message).
+    #[arg(long)]
+    takeover_field: Option<String>,
+    /// Collision topic: a failure at the first message whose field is true.
+    #[arg(long)]
+    collision_topic: Option<String>,
+    /// Field of the collision topic (default: data for std_msgs; none: any message).
+    #[arg(long)]
+    collision_field: Option<String>,
+    /// The perturbation events topic.
+    #[arg(long, default_value = perturb_bag::events::EVENTS_TOPIC)]
+    events_topic: String,
+    /// Only the events of these sensor topics decide the condition (repeatable; default all).
+    #[arg(long)]
+    event_stream: Vec<String>,
+    /// Lane/road departure beyond this |CTE|, metres.
+    #[arg(long, default_value_t = 2.0)]
+    cte_threshold: f64,
+    /// Metres before a failure left out of the CTE (the paper's d).
+    #[arg(long, default_value_t = 5.0)]
+    cte_exclude: f64,
+    /// Failing runs below this completion (0..1) get no CTE.
+    #[arg(long, default_value_t = 0.0)]
+    cte_min_completion: f64,
+    /// Fail with `timeout` when the route is not completed after this many seconds.
+    #[arg(long)]
+    timeout: Option<f64>,
+    /// The route counts as completed within this distance of its end, metres.
+    #[arg(long, default_value_t = 3.0)]
+    goal_tolerance: f64,
+    /// Steering change between consecutive commands that counts as an oscillation.
+    #[arg(long, default_value_t = 0.3)]
+    erratic_threshold: f64,
+    /// Failing before this many metres along the route after an oscillation: erratic_start.
+    #[arg(long, default_value_t = 5.0)]
+    erratic_distance: f64,
+    /// Route curvature (1/m) from which a departure is understeer/oversteer, not road_departure.
+    #[arg(long, default_value_t = 0.02)]
+    turn_curvature: f64,
+    /// Near-field radius of the coverage, metres.
+    #[arg(long, default_value_t = 5.0)]
+    near_field: f64,
+    /// A known vehicle is detected when an object lies within this distance, metres.
+    #[arg(long, default_value_t = 2.0)]
+    match_distance: f64,
+    /// Segments shorter than this many seconds merge into the next one.
+    #[arg(long, default_value_t = 0.5)]
+    min_segment: f64,
+    /// Which runs the per-perturbation CTE and jitter average (default: non-failing for
+    /// analyze, all for compare).
+    #[arg(long, value_enum)]
+    aggregate: Option<AggregateArg>,
+    /// Jitter per command (the paper) or per second (a rate).
+    #[arg(long, value_enum, default_value_t = JitterArg::Command)]
+    jitter_per: JitterArg,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum FrameArg {
+    Ego,
+    Map,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum AggregateArg {
+    NonFailing,
+    All,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum JitterArg {
+    Command,
+    Second,
+}
+
+#[derive(clap::Args)]
+struct TransferArgs {
+    /// The model-level table (perturb metrics ... --format json, or CSV).
+    #[arg(long)]
+    offline: PathBuf,
+    /// The closed-loop table (perturb analyze --json, or CSV).
+    #[arg(long)]
+    closed_loop: PathBuf,
+    /// Offline metrics to test (repeatable).
+    #[arg(long)]
+    offline_metric: Vec<String>,
+    /// Closed-loop metrics to test (repeatable).
+    #[arg(long)]
+    closed_loop_metric: Vec<String>,
+    /// Bootstrap resamples.
+    #[arg(long, default_value_t = 10_000)]
+    resamples: usize,
+    /// Seed of the bootstrap.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Confidence level of the intervals.
+    #[arg(long, default_value_t = 0.95)]
+    level: f64,
+    /// k of the top-k overlap.
+    #[arg(long, default_value_t = 5)]
+    top_k: usize,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    format: Format,
+}
+
+#[derive(clap::Args)]
+struct CompareArgs {
+    /// A set of runs: NAME=DIR (repeatable, in table order).
+    #[arg(long = "set", value_name = "NAME=DIR", required = true)]
+    sets: Vec<String>,
+    #[command(flatten)]
+    run: RunArgs,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    format: Format,
+}
+
+impl RunArgs {
+    fn config(&self, default_aggregate: Aggregate) -> Result<AnalyzeConfig> {
+        if self.route.is_some() && self.pose_topic.is_none() {
+            bail!("--route needs --pose-topic: the topic with the vehicle's position");
+        }
+        let tf = |topic: &Option<String>, field: &Option<String>| {
+            topic.as_ref().map(|t| TopicField {
+                topic: t.clone(),
+                field: field.clone(),
+            })
+        };
+        if self.pose_field.is_some() && self.pose_topic.is_none() {
+            bail!("--pose-field needs --pose-topic");
+        }
+        if self.steering_field.is_some() && self.steering_topic.is_none() {
+            bail!("--steering-field needs --steering-topic");
+        }
+        Ok(AnalyzeConfig {
+            route: self.route.as_deref().map(Route::from_csv).transpose()?,
+            pose: tf(&self.pose_topic, &self.pose_field),
+            steering: tf(&self.steering_topic, &self.steering_field),
+            objects: self.objects_topic.as_ref().map(|t| ObjectsConfig {
+                topic: t.clone(),
+                array: self.objects_array.clone(),
+                position: self.object_position.clone(),
+                frame: match self.objects_frame {
+                    FrameArg::Ego => ObjectsFrame::Ego,
+                    FrameArg::Map => ObjectsFrame::Map,
+                },
+            }),
+            vehicles: self
+                .vehicles
+                .as_deref()
+                .map(perturb_study::route::read_xy_csv)
+                .transpose()?,
+            takeover: tf(&self.takeover_topic, &self.takeover_field),
+            collision: tf(&self.collision_topic, &self.collision_field),
+            events_topic: self.events_topic.clone(),
+            event_streams: self.event_stream.clone(),
+            cte_threshold: self.cte_threshold,
+            cte_exclude_m: self.cte_exclude,
+            cte_min_completion: self.cte_min_completion,
+            timeout_s: self.timeout,
+            goal_tolerance_m: self.goal_tolerance,
+            erratic_threshold: self.erratic_threshold,
+            erratic_distance_m: self.erratic_distance,
+            turn_curvature: self.turn_curvature,
+            near_field_m: self.near_field,
+            match_distance_m: self.match_distance,
+            min_segment_s: self.min_segment,
+            aggregate: match self.aggregate {
+                Some(AggregateArg::All) => Aggregate::All,
+                Some(AggregateArg::NonFailing) => Aggregate::NonFailing,
+                None => default_aggregate,
+            },
+            jitter_unit: match self.jitter_per {
+                JitterArg::Command => JitterUnit::Command,
+                JitterArg::Second => JitterUnit::Second,
+            },
+            ..AnalyzeConfig::default()
+        })
+    }
+
+    fn pool(&self) -> Result<rayon::ThreadPool> {
+        Ok(rayon::ThreadPoolBuilder::new()
+            .num_threads(self.threads.unwrap_or(0))
+            .build()?)
+    }
+}
+
+fn write(path: &Path, text: &str) -> Result<()> {
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Runs `perturb analyze`.
+pub fn run(a: Args) -> Result<()> {
+    match a.command {
+        Some(Command::Transfer(t)) => return transfer(t),
+        Some(Command::Compare(c)) => return compare(*c),
+        None => {}
+    }
+    let runs_dir = a.runs.clone().expect("required by clap");
+    let cfg = a.run.config(Aggregate::NonFailing)?;
+    let analysis = a
+        .run
+        .pool()?
+        .install(|| perturb_study::analyze::analyze_dir(&runs_dir, &cfg))?;
+    let hot = perturb_study::hotspots::hotspots(&analysis.runs, a.eps, a.min_points);
+    let map_path = a
+        .map
+        .clone()
+        .or_else(|| a.out.as_ref().map(|o| o.join("map.png")));
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        use perturb_study::Format as F;
+        for (name, f) in [("md", F::Markdown), ("csv", F::Csv)] {
+            write(
+                &dir.join(format!("runs.{name}")),
+                &render_runs(&analysis.runs, f),
+            )?;
+            write(
+                &dir.join(format!("segments.{name}")),
+                &render_segments(&analysis.segments, f),
+            )?;
+            write(
+                &dir.join(format!("conditions.{name}")),
+                &render_conditions(&analysis.conditions, f),
+            )?;
+            write(
+                &dir.join(format!("perturbations.{name}")),
+                &render_perturbations(&analysis.perturbations, f),
+            )?;
+            write(
+                &dir.join(format!("hotspots.{name}")),
+                &perturb_study::hotspots::render(&hot, f),
+            )?;
+        }
+        write(&dir.join("analysis.json"), &analysis_json(&analysis, &hot))?;
+    }
+    if let Some(path) = &map_path {
+        match perturb_study::plot::trajectory_map(
+            cfg.route.as_ref(),
+            &analysis.runs,
+            &hot,
+            &perturb_study::plot::MapOptions {
+                width: a.map_width,
+                ..Default::default()
+            },
+        ) {
+            Some(img) => perturb_study::files::save_image(
+                path,
+                &img.view(),
+                perturb_core::formats::FileKind::Png,
+            )?,
+            None => eprintln!("no map: nothing to draw"),
+        }
+    }
+    if a.json {
+        print!("{}", analysis_json(&analysis, &hot));
+    } else {
+        let format: perturb_study::Format = a.format.into();
+        let tables = if a.table.is_empty() {
+            vec![
+                TableKind::Runs,
+                TableKind::Conditions,
+                TableKind::Perturbations,
+                TableKind::Hotspots,
+            ]
+        } else {
+            a.table.clone()
+        };
+        for (k, t) in tables.iter().enumerate() {
+            let (title, body) = match t {
+                TableKind::Runs => ("runs", render_runs(&analysis.runs, format)),
+                TableKind::Segments => ("segments", render_segments(&analysis.segments, format)),
+                TableKind::Conditions => (
+                    "per (perturbation, severity)",
+                    render_conditions(&analysis.conditions, format),
+                ),
+                TableKind::Perturbations => (
+                    "per perturbation",
+                    render_perturbations(&analysis.perturbations, format),
+                ),
+                TableKind::Hotspots => (
+                    "failure hotspots",
+                    perturb_study::hotspots::render(&hot, format),
+                ),
+            };
+            if k > 0 {
+                println!();
+            }
+            match format {
+                perturb_study::Format::Csv => println!("# {title}"),
+                perturb_study::Format::Markdown => println!("### {title}\n"),
+                _ => println!("== {title}"),
+            }
+            print!("{body}");
+        }
+    }
+    for r in &analysis.runs {
+        for n in &r.notes {
+            eprintln!("note: run `{}`: {n}", r.run);
+        }
+    }
+    if let (Some(dir), false) = (&a.out, a.json) {
+        eprintln!(
+            "tables, analysis.json and the map written to {}",
+            dir.display()
+        );
+    }
+    if !analysis.errors.is_empty() {
+        for e in &analysis.errors {
+            eprintln!("error: {}", e.error);
+        }
+        bail!(
+            "{} of {} runs could not be analysed (the others were)",
+            analysis.errors.len(),
+            analysis.errors.len() + analysis.runs.len()
+        );
+    }
+    Ok(())
+}
+
+fn analysis_json(
+    a: &perturb_study::analyze::Analysis,
+    hot: &perturb_study::hotspots::Hotspots,
+) -> String {
+    #[derive(serde::Serialize)]
+    struct Out<'a> {
+        #[serde(flatten)]
+        analysis: &'a perturb_study::analyze::Analysis,
+        hotspots: &'a perturb_study::hotspots::Hotspots,
+    }
+    serde_json::to_string_pretty(&Out {
+        analysis: a,
+        hotspots: hot,
+    })
+    .expect("the analysis serialises")
+        + "\n"
+}
+
+fn transfer(t: TransferArgs) -> Result<()> {
+    use perturb_study::transfer::{TransferConfig, read_table, render, transfer};
+    if !(t.level > 0.0 && t.level < 1.0) {
+        bail!("--level must be between 0 and 1, not {}", t.level);
+    }
+    if t.resamples == 0 {
+        bail!("--resamples must be at least 1");
+    }
+    let off = read_table(&t.offline)?;
+    let cl = read_table(&t.closed_loop)?;
+    let res = transfer(
+        &off,
+        &cl,
+        &TransferConfig {
+            offline_metrics: t.offline_metric,
+            closed_loop_metrics: t.closed_loop_metric,
+            resamples: t.resamples,
+            seed: t.seed,
+            level: t.level,
+            top_k: t.top_k,
+        },
+    )?;
+    eprintln!(
+        "{} (perturbation, severity) pairs in both tables; {} resamples from seed {}",
+        res.matched, res.resamples, res.seed
+    );
+    print!("{}", render(&res, t.format.into()));
+    Ok(())
+}
+
+fn compare(c: CompareArgs) -> Result<()> {
+    let cfg = c.run.config(Aggregate::All)?;
+    let pool = c.run.pool()?;
+    let mut sets = Vec::new();
+    let mut failed = 0;
+    for s in &c.sets {
+        let Some((name, dir)) = s.split_once('=') else {
+            bail!("--set {s}: expected NAME=DIR");
+        };
+        let a = pool.install(|| perturb_study::analyze::analyze_dir(Path::new(dir), &cfg))?;
+        for e in &a.errors {
+            eprintln!("error: set `{name}`: {}", e.error);
+        }
+        failed += a.errors.len();
+        sets.push((name.to_string(), a));
+    }
+    let rows = perturb_study::compare::compare(&sets, cfg.aggregate);
+    print!("{}", perturb_study::compare::render(&rows, c.format.into()));
+    if failed > 0 {
+        bail!("{failed} runs could not be analysed (the others were)");
+    }
+    Ok(())
+}

@@ -1,0 +1,552 @@
+//! Reading the configured topics of a run into plain time series, decoding every message by the
+//! schema stored in the bag.
+
+use super::{AnalyzeConfig, Condition, ObjectsFrame, TopicField};
+use crate::error::{Result, StudyError};
+use crate::source::{RunEntry, TopicSchema, open_run};
+use perturb_bag::dynamic::{DynError, FieldPath, MessageCodec, Value};
+use perturb_bag::events::PerturbationEvent;
+use std::collections::BTreeMap;
+
+/// One pose sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseSample {
+    /// Seconds from the run's start.
+    pub t: f64,
+    /// Position in the pose frame, metres.
+    pub p: [f64; 2],
+    /// Heading (yaw), radians, when the message has an orientation.
+    pub yaw: Option<f64>,
+}
+
+/// The time series of one run, as the metrics need them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunData {
+    /// The run's name.
+    pub name: String,
+    /// The run's group (sub-folder), if any.
+    pub group: Option<String>,
+    /// Log time of the first message read, ns (t = 0).
+    pub t0_ns: u64,
+    /// Seconds from the start to the last message read.
+    pub end: f64,
+    /// Poses in time order.
+    pub poses: Vec<PoseSample>,
+    /// Steering commands (t, value).
+    pub steering: Vec<(f64, f64)>,
+    /// Detected objects per message (t, positions in [`RunData::objects_frame`]).
+    pub objects: Vec<(f64, Vec<[f64; 2]>)>,
+    /// The frame of the objects.
+    pub objects_frame: ObjectsFrame,
+    /// First takeover signal.
+    pub takeover: Option<f64>,
+    /// First collision signal.
+    pub collision: Option<f64>,
+    /// Condition changes (t, condition from then on), in time order.
+    pub events: Vec<(f64, Condition)>,
+    /// Remarks.
+    pub notes: Vec<String>,
+}
+
+/// The default position path of a pose-like message type.
+const POSITION_CANDIDATES: [&str; 6] = [
+    "pose.pose.position",
+    "pose.position",
+    "position",
+    "transform.translation",
+    "point",
+    "pose.pose.pose.position",
+];
+
+fn default_steering_field(type_name: &str) -> Option<&'static str> {
+    let t = perturb_bag::dynamic::normalize_type_name(type_name);
+    Some(match t.as_str() {
+        "ackermann_msgs/AckermannDriveStamped" => "drive.steering_angle",
+        "ackermann_msgs/AckermannDrive" => "steering_angle",
+        "std_msgs/Float32" | "std_msgs/Float64" => "data",
+        "autoware_auto_control_msgs/AckermannControlCommand" | "autoware_control_msgs/Control" => {
+            "lateral.steering_tire_angle"
+        }
+        "autoware_auto_control_msgs/AckermannLateralCommand" | "autoware_control_msgs/Lateral" => {
+            "steering_tire_angle"
+        }
+        "autoware_msgs/VehicleCmd" => "ctrl_cmd.steering_angle",
+        "autoware_msgs/ControlCommandStamped" => "cmd.steering_angle",
+        _ => return None,
+    })
+}
+
+fn default_objects(type_name: &str) -> Option<(&'static str, &'static str)> {
+    let t = perturb_bag::dynamic::normalize_type_name(type_name);
+    Some(match t.as_str() {
+        "autoware_msgs/DetectedObjectArray" => ("objects", "pose.position"),
+        "vision_msgs/Detection3DArray" => ("detections", "bbox.center.position"),
+        "autoware_auto_perception_msgs/DetectedObjects"
+        | "autoware_perception_msgs/DetectedObjects" => {
+            ("objects", "kinematics.pose_with_covariance.pose.position")
+        }
+        "autoware_auto_perception_msgs/PredictedObjects"
+        | "autoware_perception_msgs/PredictedObjects" => (
+            "objects",
+            "kinematics.initial_pose_with_covariance.pose.position",
+        ),
+        "autoware_auto_perception_msgs/TrackedObjects"
+        | "autoware_perception_msgs/TrackedObjects" => {
+            ("objects", "kinematics.pose_with_covariance.pose.position")
+        }
+        "visualization_msgs/MarkerArray" => ("markers", "pose.position"),
+        "geometry_msgs/PoseArray" => ("poses", "position"),
+        _ => return None,
+    })
+}
+
+fn default_flag_field(type_name: &str) -> Option<&'static str> {
+    let t = perturb_bag::dynamic::normalize_type_name(type_name);
+    match t.as_str() {
+        "std_msgs/Bool" | "std_msgs/Int8" | "std_msgs/UInt8" | "std_msgs/Int32"
+        | "std_msgs/String" => Some("data"),
+        _ => None,
+    }
+}
+
+/// Everything needed to read one topic.
+struct Reader {
+    codec: MessageCodec,
+    topic: String,
+}
+
+impl Reader {
+    fn path(&self, run: &str, field: &str) -> Result<FieldPath> {
+        self.codec.path(field).map_err(|source| StudyError::Field {
+            run: run.to_string(),
+            topic: self.topic.clone(),
+            field: field.to_string(),
+            source: Box::new(source),
+        })
+    }
+}
+
+fn reader(run: &str, topics: &[TopicSchema], topic: &str, what: &str) -> Result<Reader> {
+    let Some(t) = topics.iter().find(|t| t.topic == topic) else {
+        let mut names: Vec<&str> = topics.iter().map(|t| t.topic.as_str()).collect();
+        names.sort();
+        return Err(StudyError::Run {
+            run: run.to_string(),
+            reason: format!(
+                "no {what} topic `{topic}` in the bag (its topics: {})",
+                names.join(", ")
+            ),
+        });
+    };
+    let codec = MessageCodec::new(
+        &t.type_name,
+        &t.schema_encoding,
+        &t.schema,
+        &t.message_encoding,
+    )
+    .map_err(|e| StudyError::Run {
+        run: run.to_string(),
+        reason: format!("the schema of `{topic}` ({}) is unusable: {e}", t.type_name),
+    })?;
+    Ok(Reader {
+        codec,
+        topic: topic.to_string(),
+    })
+}
+
+/// The yaw of a quaternion (x, y, z, w).
+fn yaw_of(q: [f64; 4]) -> f64 {
+    let [x, y, z, w] = q;
+    (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
+}
+
+struct PoseReader {
+    r: Reader,
+    x: FieldPath,
+    y: FieldPath,
+    orientation: Option<FieldPath>,
+}
+
+fn pose_reader(run: &str, topics: &[TopicSchema], cfg: &TopicField) -> Result<PoseReader> {
+    let r = reader(run, topics, &cfg.topic, "pose")?;
+    let base = match &cfg.field {
+        Some(f) => f.trim_end_matches(".x").to_string(),
+        None => POSITION_CANDIDATES
+            .iter()
+            .find(|c| r.codec.path(&format!("{c}.x")).is_ok())
+            .map(|c| c.to_string())
+            .ok_or_else(|| StudyError::Run {
+                run: run.to_string(),
+                reason: format!(
+                    "cannot tell where the position is in `{}` messages ({}); give it with --pose-field (e.g. pose.pose.position)",
+                    cfg.topic,
+                    r.codec.schema().root
+                ),
+            })?,
+    };
+    let x = r.path(run, &format!("{base}.x"))?;
+    let y = r.path(run, &format!("{base}.y"))?;
+    let parent = base
+        .rsplit_once('.')
+        .map(|(p, _)| format!("{p}."))
+        .unwrap_or_default();
+    let orientation = ["orientation", "rotation"]
+        .iter()
+        .find_map(|o| r.codec.path(&format!("{parent}{o}")).ok());
+    Ok(PoseReader {
+        r,
+        x,
+        y,
+        orientation,
+    })
+}
+
+struct ScalarReader {
+    r: Reader,
+    /// None: every message counts (a signal topic without a field).
+    field: Option<FieldPath>,
+}
+
+fn scalar_reader(
+    run: &str,
+    topics: &[TopicSchema],
+    cfg: &TopicField,
+    what: &str,
+    default: fn(&str) -> Option<&'static str>,
+    required: bool,
+) -> Result<ScalarReader> {
+    let r = reader(run, topics, &cfg.topic, what)?;
+    let type_name = &r.codec.schema().root;
+    let field = match (&cfg.field, default(type_name)) {
+        (Some(f), _) => Some(f.clone()),
+        (None, Some(d)) => Some(d.to_string()),
+        (None, None) if required => {
+            return Err(StudyError::Run {
+                run: run.to_string(),
+                reason: format!(
+                    "no default {what} field for `{}` messages on `{}`; give it with --{what}-field",
+                    type_name, cfg.topic
+                ),
+            });
+        }
+        (None, None) => None,
+    };
+    let field = field.map(|f| r.path(run, &f)).transpose()?;
+    Ok(ScalarReader { r, field })
+}
+
+struct ObjectsReader {
+    r: Reader,
+    array: FieldPath,
+    position: String,
+}
+
+fn objects_reader(
+    run: &str,
+    topics: &[TopicSchema],
+    cfg: &super::ObjectsConfig,
+) -> Result<ObjectsReader> {
+    let r = reader(run, topics, &cfg.topic, "objects")?;
+    let defaults = default_objects(&r.codec.schema().root);
+    let array = match (&cfg.array, defaults) {
+        (Some(a), _) => a.clone(),
+        (None, Some((a, _))) => a.to_string(),
+        (None, None) => {
+            return Err(StudyError::Run {
+                run: run.to_string(),
+                reason: format!(
+                    "cannot tell where the objects are in `{}` messages on `{}`; give --objects-array and --object-position",
+                    r.codec.schema().root,
+                    cfg.topic
+                ),
+            });
+        }
+    };
+    let position = match (&cfg.position, defaults) {
+        (Some(p), _) => p.clone(),
+        (None, Some((_, p))) => p.to_string(),
+        (None, None) => "pose.position".to_string(),
+    };
+    // Check the element paths against the schema now, so a typo is an error, not silence.
+    r.path(run, &format!("{array}[0].{position}.x"))?;
+    r.path(run, &format!("{array}[0].{position}.y"))?;
+    let array = r.path(run, &array)?;
+    Ok(ObjectsReader { r, array, position })
+}
+
+/// Reads the configured topics of a run. Errors name the run (and the topic and field): a
+/// missing pose topic, a field path the message type does not have, an unreadable bag.
+pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
+    let run = entry.name.as_str();
+    let bag = open_run(&entry.path).map_err(|e| StudyError::Run {
+        run: run.to_string(),
+        reason: e.to_string(),
+    })?;
+    let topics = bag.topics().map_err(|e| StudyError::Run {
+        run: run.to_string(),
+        reason: e.to_string(),
+    })?;
+    let mut notes = Vec::new();
+    if cfg.route.is_some() && cfg.pose.is_none() {
+        return Err(StudyError::Config(
+            "a route needs a pose topic (--pose-topic) to follow the vehicle".into(),
+        ));
+    }
+    let pose = cfg
+        .pose
+        .as_ref()
+        .map(|p| pose_reader(run, &topics, p))
+        .transpose()?;
+    // A run without the steering or objects topic (a LiDAR run has no steering command of an
+    // end-to-end model, a camera run no detections) has no jitter or coverage, with a note.
+    let has = |topic: &str| topics.iter().any(|t| t.topic == topic);
+    let steering = match &cfg.steering {
+        Some(s) if has(&s.topic) => Some(scalar_reader(
+            run,
+            &topics,
+            s,
+            "steering",
+            default_steering_field,
+            true,
+        )?),
+        Some(s) => {
+            notes.push(format!("no steering topic `{}`: no jitter", s.topic));
+            None
+        }
+        None => None,
+    };
+    let objects = match &cfg.objects {
+        Some(o) if has(&o.topic) => Some(objects_reader(run, &topics, o)?),
+        Some(o) => {
+            notes.push(format!("no objects topic `{}`: no coverage", o.topic));
+            None
+        }
+        None => None,
+    };
+    // A missing takeover or collision topic means the signal never fired (a recorder only
+    // writes topics that had messages).
+    let mut flag = |cfg: &Option<TopicField>, what: &str| -> Result<Option<ScalarReader>> {
+        match cfg {
+            Some(c) if topics.iter().any(|t| t.topic == c.topic) => Ok(Some(scalar_reader(
+                run,
+                &topics,
+                c,
+                what,
+                default_flag_field,
+                false,
+            )?)),
+            Some(c) => {
+                notes.push(format!("no `{}` topic: no {what} signal", c.topic));
+                Ok(None)
+            }
+            None => Ok(None),
+        }
+    };
+    let takeover = flag(&cfg.takeover, "takeover")?;
+    let collision = flag(&cfg.collision, "collision")?;
+    let events = if topics.iter().any(|t| t.topic == cfg.events_topic) {
+        Some(reader(run, &topics, &cfg.events_topic, "events")?)
+    } else {
+        notes.push(format!(
+            "no `{}` topic: the whole run counts as nominal",
+            cfg.events_topic
+        ));
+        None
+    };
+    let events_data = events.as_ref().map(|e| e.path(run, "data")).transpose()?;
+
+    let mut wanted: Vec<String> = Vec::new();
+    for r in [
+        pose.as_ref().map(|p| &p.r),
+        steering.as_ref().map(|s| &s.r),
+        objects.as_ref().map(|o| &o.r),
+        takeover.as_ref().map(|s| &s.r),
+        collision.as_ref().map(|s| &s.r),
+        events.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        if !wanted.contains(&r.topic) {
+            wanted.push(r.topic.clone());
+        }
+    }
+
+    let mut d = RunData {
+        name: entry.name.clone(),
+        group: entry.group.clone(),
+        objects_frame: cfg.objects.as_ref().map(|o| o.frame).unwrap_or_default(),
+        ..RunData::default()
+    };
+    let mut t0: Option<u64> = None;
+    let mut last = 0u64;
+    let mut bad: BTreeMap<String, (usize, String)> = BTreeMap::new();
+    let mut stream_state: BTreeMap<String, Option<(String, u8)>> = BTreeMap::new();
+    let mut other_streams: BTreeMap<String, usize> = BTreeMap::new();
+    let mut current: Option<Condition> = None;
+    let damage = bag.read(&wanted, &mut |m| {
+        let t0 = *t0.get_or_insert(m.log_time);
+        last = last.max(m.log_time);
+        let t = m.log_time.saturating_sub(t0) as f64 / 1e9;
+        let mut fail = |topic: &str, e: DynError| {
+            let b = bad.entry(topic.to_string()).or_insert((0, e.to_string()));
+            b.0 += 1;
+        };
+        if let Some(pose) = &pose
+            && m.topic == pose.r.topic
+        {
+            let xy = pose
+                .r
+                .codec
+                .get_f64(m.data, &pose.x)
+                .and_then(|x| Ok([x, pose.r.codec.get_f64(m.data, &pose.y)?]));
+            match xy {
+                Ok(p) => {
+                    let yaw = pose.orientation.as_ref().and_then(|o| {
+                        let q = pose.r.codec.get(m.data, o).ok()?;
+                        let c = |n| q.field(n).and_then(Value::as_f64);
+                        Some(yaw_of([c("x")?, c("y")?, c("z")?, c("w")?]))
+                    });
+                    d.poses.push(PoseSample { t, p, yaw });
+                }
+                Err(e) => fail(m.topic, e),
+            }
+        }
+        if let Some(s) = &steering
+            && m.topic == s.r.topic
+            && let Some(f) = &s.field
+        {
+            match s.r.codec.get_f64(m.data, f) {
+                Ok(v) => d.steering.push((t, v)),
+                Err(e) => fail(m.topic, e),
+            }
+        }
+        if let Some(o) = &objects
+            && m.topic == o.r.topic
+        {
+            match o.r.codec.get(m.data, &o.array) {
+                Ok(Value::Array(items)) => {
+                    let pts = items
+                        .iter()
+                        .filter_map(|it| {
+                            let p = it.at(&o.position)?;
+                            Some([p.field("x")?.as_f64()?, p.field("y")?.as_f64()?])
+                        })
+                        .collect();
+                    d.objects.push((t, pts));
+                }
+                Ok(other) => fail(
+                    m.topic,
+                    DynError::NotANumber {
+                        path: o.array.to_string(),
+                        kind: other.kind(),
+                    },
+                ),
+                Err(e) => fail(m.topic, e),
+            }
+        }
+        for (sig, slot) in [(&takeover, &mut d.takeover), (&collision, &mut d.collision)] {
+            let Some(s) = sig else { continue };
+            if m.topic != s.r.topic || slot.is_some() {
+                continue;
+            }
+            let fired = match &s.field {
+                None => Ok(true),
+                Some(f) => s.r.codec.get(m.data, f).map(|v| match v {
+                    Value::String(st) => {
+                        let st = st.trim().to_ascii_lowercase();
+                        !(st.is_empty() || st == "0" || st == "false")
+                    }
+                    other => other.as_bool().unwrap_or(false),
+                }),
+            };
+            match fired {
+                Ok(true) => *slot = Some(t),
+                Ok(false) => {}
+                Err(e) => fail(m.topic, e),
+            }
+        }
+        if let (Some(e), Some(path)) = (&events, &events_data)
+            && m.topic == e.topic
+        {
+            let text = e.codec.get(m.data, path);
+            let ev = match &text {
+                Ok(Value::String(s)) => serde_json::from_str::<PerturbationEvent>(s)
+                    .map_err(|err| format!("not a perturbation event ({err})")),
+                Ok(v) => Err(format!("expected a string, found a {}", v.kind())),
+                Err(err) => Err(err.to_string()),
+            };
+            match ev {
+                Ok(ev) => {
+                    if !(cfg.event_streams.is_empty() || cfg.event_streams.contains(&ev.topic)) {
+                        *other_streams.entry(ev.topic.clone()).or_default() += 1;
+                    } else {
+                        let state = match (ev.id, ev.severity) {
+                            (Some(id), Some(s)) => Some((id, s)),
+                            _ => None,
+                        };
+                        stream_state.insert(ev.topic, state);
+                        let mut c: Vec<(String, u8)> =
+                            stream_state.values().flatten().cloned().collect();
+                        c.sort();
+                        c.dedup();
+                        let c = Condition(c);
+                        if current.as_ref() != Some(&c) {
+                            d.events.push((t, c.clone()));
+                            current = Some(c);
+                        }
+                    }
+                }
+                Err(reason) => {
+                    let b = bad.entry(m.topic.to_string()).or_insert((0, reason));
+                    b.0 += 1;
+                }
+            }
+        }
+        Ok(())
+    });
+    let damage = damage.map_err(|e| StudyError::Run {
+        run: run.to_string(),
+        reason: e.to_string(),
+    })?;
+    if let Some(dmg) = damage {
+        notes.push(format!("the bag is damaged; read up to the damage: {dmg}"));
+    }
+    if !cfg.event_streams.is_empty() && stream_state.is_empty() && !other_streams.is_empty() {
+        notes.push(format!(
+            "no event of the streams {} (the events name {}): the whole run counts as nominal",
+            cfg.event_streams.join(", "),
+            other_streams.keys().cloned().collect::<Vec<_>>().join(", ")
+        ));
+    }
+    for (topic, (n, first)) in bad {
+        notes.push(format!(
+            "{n} message(s) on `{topic}` could not be read and were skipped (first: {first})"
+        ));
+    }
+    if let Some(p) = &cfg.pose
+        && d.poses.is_empty()
+    {
+        return Err(StudyError::Run {
+            run: run.to_string(),
+            reason: format!("no readable message on the pose topic `{}`", p.topic),
+        });
+    }
+    if t0.is_none() {
+        return Err(StudyError::Run {
+            run: run.to_string(),
+            reason: format!(
+                "no message on any of the topics read ({})",
+                wanted.join(", ")
+            ),
+        });
+    }
+    d.t0_ns = t0.unwrap_or(0);
+    d.end = last.saturating_sub(d.t0_ns) as f64 / 1e9;
+    d.notes = notes;
+    // The bag's order is log time; sort defensively (a bag without index is read in file order).
+    d.poses.sort_by(|a, b| a.t.total_cmp(&b.t));
+    d.steering.sort_by(|a, b| a.0.total_cmp(&b.0));
+    d.objects.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(d)
+}

@@ -1,0 +1,405 @@
+//! Synthetic recorded runs for the analysis tests: a kinematic vehicle driving a known route
+//! (100 m straight east, a 20 m radius left quarter turn, 80 m straight north) with a chosen
+//! lateral offset, steering signal, perturbation events, collision flag and detected objects,
+//! written as rosbag2 MCAP bags with the project's bag writer (the one recordings use). Message
+//! types the project has no schema for (Odometry, AckermannDriveStamped, Bool, PoseArray) are
+//! written with their ros2msg definitions and encoded by the schema-driven codec.
+#![allow(dead_code)]
+
+use perturb_bag::dynamic::{MessageCodec, Value};
+use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string};
+use perturb_bag::{BagWriter, WriterOptions};
+use std::collections::BTreeMap;
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+const SEP: &str =
+    "================================================================================\n";
+
+fn msg(deps: &[(&str, &str)], main: &str) -> String {
+    let mut s = main.to_string();
+    for (name, text) in deps {
+        s.push_str(SEP);
+        s.push_str(&format!("MSG: {name}\n{text}"));
+    }
+    s
+}
+
+const HEADER: (&str, &str) = (
+    "std_msgs/Header",
+    "builtin_interfaces/Time stamp\nstring frame_id\n",
+);
+const TIME: (&str, &str) = ("builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n");
+const POSE: (&str, &str) = (
+    "geometry_msgs/Pose",
+    "Point position\nQuaternion orientation\n",
+);
+const POINT: (&str, &str) = ("geometry_msgs/Point", "float64 x\nfloat64 y\nfloat64 z\n");
+const QUAT: (&str, &str) = (
+    "geometry_msgs/Quaternion",
+    "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+);
+const VEC3: (&str, &str) = ("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n");
+
+/// nav_msgs/msg/Odometry.
+pub fn odometry_schema() -> String {
+    msg(
+        &[
+            HEADER,
+            TIME,
+            (
+                "geometry_msgs/PoseWithCovariance",
+                "Pose pose\nfloat64[36] covariance\n",
+            ),
+            POSE,
+            POINT,
+            QUAT,
+            (
+                "geometry_msgs/TwistWithCovariance",
+                "Twist twist\nfloat64[36] covariance\n",
+            ),
+            ("geometry_msgs/Twist", "Vector3  linear\nVector3  angular\n"),
+            VEC3,
+        ],
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n",
+    )
+}
+
+/// geometry_msgs/msg/PoseStamped.
+pub fn pose_stamped_schema() -> String {
+    msg(
+        &[HEADER, TIME, POSE, POINT, QUAT],
+        "std_msgs/Header header\nPose pose\n",
+    )
+}
+
+/// ackermann_msgs/msg/AckermannDriveStamped.
+pub fn ackermann_schema() -> String {
+    msg(
+        &[
+            HEADER,
+            TIME,
+            (
+                "ackermann_msgs/AckermannDrive",
+                "float32 steering_angle\nfloat32 steering_angle_velocity\nfloat32 speed\nfloat32 acceleration\nfloat32 jerk\n",
+            ),
+        ],
+        "std_msgs/Header header\nAckermannDrive drive\n",
+    )
+}
+
+/// geometry_msgs/msg/PoseArray.
+pub fn pose_array_schema() -> String {
+    msg(
+        &[HEADER, TIME, POSE, POINT, QUAT],
+        "std_msgs/Header header\ngeometry_msgs/Pose[] poses\n",
+    )
+}
+
+/// The route's radius of turn and lengths.
+pub const R: f64 = 20.0;
+pub const STRAIGHT1: f64 = 100.0;
+pub const STRAIGHT2: f64 = 80.0;
+
+/// Total route length.
+pub fn route_length() -> f64 {
+    STRAIGHT1 + PI * R / 2.0 + STRAIGHT2
+}
+
+/// The route point at arc length s (clamped) and the unit normal to its left.
+pub fn route_point(s: f64) -> ([f64; 2], [f64; 2]) {
+    let s = s.clamp(0.0, route_length());
+    let turn = PI * R / 2.0;
+    if s <= STRAIGHT1 {
+        ([s, 0.0], [0.0, 1.0])
+    } else if s <= STRAIGHT1 + turn {
+        let th = (s - STRAIGHT1) / R;
+        (
+            [STRAIGHT1 + R * th.sin(), R - R * th.cos()],
+            [-th.sin(), th.cos()],
+        )
+    } else {
+        ([STRAIGHT1 + R, R + (s - STRAIGHT1 - turn)], [-1.0, 0.0])
+    }
+}
+
+/// Heading of the route at s.
+pub fn route_heading(s: f64) -> f64 {
+    let (_, n) = route_point(s);
+    n[1].atan2(n[0]) - PI / 2.0
+}
+
+/// Writes the route as ROUTE.csv (a point every metre and the end).
+pub fn write_route(path: &Path) {
+    let l = route_length();
+    let mut text = String::from("x,y\n");
+    let mut s = 0.0;
+    while s < l {
+        let (p, _) = route_point(s);
+        text.push_str(&format!("{},{}\n", p[0], p[1]));
+        s += 1.0;
+    }
+    let (p, _) = route_point(l);
+    text.push_str(&format!("{},{}\n", p[0], p[1]));
+    std::fs::write(path, text).unwrap();
+}
+
+/// Base log time of every run, ns.
+pub const T0: u64 = 1_700_000_000_000_000_000;
+
+/// Pose, steering, events and objects are sampled at 10 Hz, shifted so they never coincide:
+/// events at k/10 s, poses at k/10 + 0.02 s, steering at k/10 + 0.05 s, objects at k/10 +
+/// 0.07 s.
+pub const POSE_SHIFT: f64 = 0.02;
+pub const STEER_SHIFT: f64 = 0.05;
+pub const OBJECTS_SHIFT: f64 = 0.07;
+
+type F1 = Box<dyn Fn(f64) -> f64>;
+/// The condition at a time.
+type CondFn = Box<dyn Fn(f64) -> Option<(&'static str, u8)>>;
+/// Objects in the vehicle frame for message k at time t, the vehicle at a position.
+type ObjectsFn = Box<dyn Fn(usize, f64, [f64; 2]) -> Vec<[f64; 2]>>;
+
+/// A synthetic run.
+pub struct Run {
+    /// Bag folder name.
+    pub name: String,
+    /// Seconds recorded.
+    pub duration: f64,
+    /// Arc length at time t.
+    pub s_of_t: F1,
+    /// Lateral offset (left positive) at time t.
+    pub offset: Box<dyn Fn(f64, f64) -> f64>,
+    /// Steering command k (at k/10 + 0.05 s); None: no steering topic.
+    pub steer: Option<Box<dyn Fn(usize) -> f64>>,
+    /// Number of steering commands (default: all within the duration).
+    pub steer_count: Option<usize>,
+    /// The condition at time t: (ID, severity) or None for nominal; None: no events topic.
+    pub cond: Option<CondFn>,
+    /// Collision flag true from this time on (Bool messages at 1 Hz, false before).
+    pub collision_at: Option<f64>,
+    /// Detected objects in the vehicle frame at time t (PoseArray on /objects).
+    pub objects: Option<ObjectsFn>,
+    /// Pose topic as PoseStamped instead of Odometry.
+    pub pose_stamped: bool,
+    /// Leave out the pose topic.
+    pub no_pose: bool,
+}
+
+impl Run {
+    /// A run at 10 m/s along the route, stopping at its end, offset 0, no steering, nominal.
+    pub fn new(name: &str, duration: f64) -> Run {
+        let l = route_length();
+        Run {
+            name: name.into(),
+            duration,
+            s_of_t: Box::new(move |t| (10.0 * t).min(l)),
+            offset: Box::new(|_, _| 0.0),
+            steer: None,
+            steer_count: None,
+            cond: Some(Box::new(|_| None)),
+            collision_at: None,
+            objects: None,
+            pose_stamped: false,
+            no_pose: false,
+        }
+    }
+
+    /// Times of the pose samples.
+    pub fn pose_times(&self) -> Vec<f64> {
+        (0..)
+            .map(|k| k as f64 / 10.0 + POSE_SHIFT)
+            .take_while(|t| *t <= self.duration)
+            .collect()
+    }
+
+    /// Position at time t (route point + offset along the left normal).
+    pub fn position(&self, t: f64) -> [f64; 2] {
+        let s = (self.s_of_t)(t);
+        let (p, n) = route_point(s);
+        let o = (self.offset)(s, t);
+        [p[0] + o * n[0], p[1] + o * n[1]]
+    }
+
+    /// Steering commands (t, value).
+    pub fn steering(&self) -> Vec<(f64, f64)> {
+        let Some(f) = &self.steer else {
+            return Vec::new();
+        };
+        (0..)
+            .map(|k| (k as f64 / 10.0 + STEER_SHIFT, k))
+            .take_while(|(t, k)| *t <= self.duration && self.steer_count.is_none_or(|n| *k < n))
+            .map(|(t, k)| (t, f(k)))
+            .collect()
+    }
+
+    /// Writes the bag under `dir`; returns its path and the last log time (s from T0).
+    pub fn write(&self, dir: &Path) -> (PathBuf, f64) {
+        let path = dir.join(&self.name);
+        let mut w = BagWriter::create(&path, &WriterOptions::default()).unwrap();
+        let mut codecs: BTreeMap<u16, MessageCodec> = BTreeMap::new();
+        let mut add = |w: &mut BagWriter, topic: &str, ty: &str, schema: &str| {
+            let id = w
+                .add_topic_with_schema(topic, ty, "ros2msg", schema.as_bytes(), BTreeMap::new())
+                .unwrap();
+            codecs.insert(
+                id,
+                MessageCodec::new(ty, "ros2msg", schema.as_bytes(), "cdr").unwrap(),
+            );
+            id
+        };
+        let pose_ch = (!self.no_pose).then(|| {
+            if self.pose_stamped {
+                add(
+                    &mut w,
+                    "/pose",
+                    "geometry_msgs/msg/PoseStamped",
+                    &pose_stamped_schema(),
+                )
+            } else {
+                add(&mut w, "/odom", "nav_msgs/msg/Odometry", &odometry_schema())
+            }
+        });
+        let steer_ch = self.steer.as_ref().map(|_| {
+            add(
+                &mut w,
+                "/cmd",
+                "ackermann_msgs/msg/AckermannDriveStamped",
+                &ackermann_schema(),
+            )
+        });
+        let coll_ch = self
+            .collision_at
+            .map(|_| add(&mut w, "/collision", "std_msgs/msg/Bool", "bool data\n"));
+        let obj_ch = self.objects.as_ref().map(|_| {
+            add(
+                &mut w,
+                "/objects",
+                "geometry_msgs/msg/PoseArray",
+                &pose_array_schema(),
+            )
+        });
+        let ev_ch = self
+            .cond
+            .as_ref()
+            .map(|_| w.add_topic(EVENTS_TOPIC, EVENTS_TYPE).unwrap());
+        // Every message, then written in time order.
+        let mut msgs: Vec<(f64, u16, Vec<u8>)> = Vec::new();
+        let stamp = |t: f64| {
+            let ns = T0 + (t * 1e9).round() as u64;
+            (
+                Value::Int((ns / 1_000_000_000) as i64),
+                Value::UInt(ns % 1_000_000_000),
+            )
+        };
+        if let Some(ch) = pose_ch {
+            let prefix = if self.pose_stamped {
+                "pose"
+            } else {
+                "pose.pose"
+            };
+            for t in self.pose_times() {
+                let p = self.position(t);
+                let yaw = route_heading((self.s_of_t)(t));
+                let (sec, nsec) = stamp(t);
+                let bytes = codecs[&ch]
+                    .encode_fields(&[
+                        ("header.stamp.sec", sec),
+                        ("header.stamp.nanosec", nsec),
+                        ("header.frame_id", Value::String("map".into())),
+                        (&format!("{prefix}.position.x"), Value::Float(p[0])),
+                        (&format!("{prefix}.position.y"), Value::Float(p[1])),
+                        (
+                            &format!("{prefix}.orientation.z"),
+                            Value::Float((yaw / 2.0).sin()),
+                        ),
+                        (
+                            &format!("{prefix}.orientation.w"),
+                            Value::Float((yaw / 2.0).cos()),
+                        ),
+                    ])
+                    .unwrap();
+                msgs.push((t, ch, bytes));
+            }
+        }
+        if let Some(ch) = steer_ch {
+            for (t, v) in self.steering() {
+                let bytes = codecs[&ch]
+                    .encode_fields(&[("drive.steering_angle", Value::Float(v))])
+                    .unwrap();
+                msgs.push((t, ch, bytes));
+            }
+        }
+        if let (Some(ch), Some(at)) = (coll_ch, self.collision_at) {
+            let mut t = 0.5;
+            while t <= self.duration {
+                let b = codecs[&ch]
+                    .encode_fields(&[("data", Value::Bool(t >= at))])
+                    .unwrap();
+                msgs.push((t, ch, b));
+                t += if t + 1.0 > at && t < at { at - t } else { 1.0 };
+            }
+        }
+        if let (Some(ch), Some(f)) = (obj_ch, &self.objects) {
+            for k in 0.. {
+                let t = k as f64 / 10.0 + OBJECTS_SHIFT;
+                if t > self.duration {
+                    break;
+                }
+                let ego = self.position(t);
+                let items: Vec<Value> = f(k, t, ego)
+                    .into_iter()
+                    .map(|o| {
+                        Value::Message(vec![(
+                            "position".into(),
+                            Value::Message(vec![
+                                ("x".into(), Value::Float(o[0])),
+                                ("y".into(), Value::Float(o[1])),
+                            ]),
+                        )])
+                    })
+                    .collect();
+                let v = Value::Message(vec![("poses".into(), Value::Array(items))]);
+                msgs.push((t, ch, codecs[&ch].encode(&v).unwrap()));
+            }
+        }
+        if let (Some(ch), Some(cond)) = (ev_ch, &self.cond) {
+            for k in 0.. {
+                let t = k as f64 / 10.0;
+                if t > self.duration {
+                    break;
+                }
+                let c = cond(t);
+                let ev = PerturbationEvent {
+                    topic: "/camera/image".into(),
+                    stream: Some("camera".into()),
+                    seq: k,
+                    stamp_sec: 0,
+                    stamp_nanosec: 0,
+                    frame_id: "camera".into(),
+                    id: c.map(|c| c.0.to_string()),
+                    severity: c.map(|c| c.1),
+                    seed: c.map(|_| 1),
+                };
+                let json = serde_json::to_string(&ev).unwrap();
+                msgs.push((t, ch, encode_string(&json)));
+            }
+        }
+        msgs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let last = msgs.last().map_or(0.0, |m| m.0);
+        for (t, ch, bytes) in &msgs {
+            let ns = T0 + (t * 1e9).round() as u64;
+            w.write(*ch, ns, ns, bytes).unwrap();
+        }
+        w.finish().unwrap();
+        (path, last)
+    }
+}
+
+/// A fresh scratch directory.
+pub fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("perturb-study-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
