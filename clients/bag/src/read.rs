@@ -190,7 +190,7 @@ pub struct ReadReport {
 }
 
 /// A file's bytes: memory-mapped, or in memory ([`Bag::from_bytes`]).
-enum Bytes {
+pub(crate) enum Bytes {
     Map(memmap2::Mmap),
     Owned(Vec<u8>),
 }
@@ -378,7 +378,7 @@ impl Bag {
             if Ros1Bag::sniff(&map) {
                 return Ok(Bag {
                     files: Vec::new(),
-                    ros1: Some(Box::new(Ros1Bag::open(path, map)?)),
+                    ros1: Some(Box::new(Ros1Bag::open(path, Bytes::Map(map))?)),
                 });
             }
         }
@@ -424,8 +424,15 @@ impl Bag {
         Ok(Bag { files, ros1: None })
     }
 
-    /// A one-file bag held in memory; `name` stands for its path in messages.
+    /// A one-file bag held in memory (MCAP or a ROS 1 `.bag`, told by its first bytes); `name`
+    /// stands for its path in messages.
     pub fn from_bytes(name: &Path, bytes: Vec<u8>) -> Result<Bag, BagError> {
+        if Ros1Bag::sniff(&bytes) {
+            return Ok(Bag {
+                files: Vec::new(),
+                ros1: Some(Box::new(Ros1Bag::open(name, Bytes::Owned(bytes))?)),
+            });
+        }
         Ok(Bag {
             files: vec![file_from_bytes(name, Bytes::Owned(bytes))?],
             ros1: None,

@@ -60,3 +60,29 @@ macro_rules! capped_allocator {
         static ALLOC: $crate::Capped = $crate::Capped;
     };
 }
+
+/// Opens `data` as a bag (MCAP or ROS 1, told by its first bytes), lists its topics and reads
+/// and decodes every message; errors and damage are expected, crashes and huge allocations are
+/// not.
+pub fn read_bag(name: &str, data: &[u8]) {
+    use std::ops::ControlFlow;
+    let Ok(bag) = perturb_bag::Bag::from_bytes(name.as_ref(), data.to_vec()) else {
+        return;
+    };
+    let _ = bag.topics();
+    let _ = bag.for_each(&perturb_bag::Filter::default(), |m| {
+        let _ = m.header_seq();
+        if let Some(Ok(msg)) = m.decode() {
+            match msg {
+                perturb_bag::SensorMessage::Image(i) => {
+                    let _ = i.view();
+                }
+                perturb_bag::SensorMessage::Cloud(c) => {
+                    let _ = c.view();
+                }
+                perturb_bag::SensorMessage::Compressed(_) => {}
+            }
+        }
+        Ok(ControlFlow::Continue(()))
+    });
+}

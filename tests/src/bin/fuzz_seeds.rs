@@ -4,6 +4,7 @@
 //! rows of an image, a few hundred points of a cloud, a small bag rewritten from the real one's
 //! messages) so the corpus stays a few hundred kilobytes. Nothing here is committed.
 
+use perturb_bag::ros1::{Ros1Compression, Ros1Writer, Ros1WriterOptions};
 use perturb_bag::{Bag, BagWriter, Compression, Filter, SensorMessage, WriterOptions};
 use perturb_core::formats::ros::{ImageMsg, PointCloud2Msg};
 use std::ops::ControlFlow;
@@ -33,10 +34,12 @@ fn put(corpus: &Path, target: &str, name: &str, bytes: &[u8]) {
     std::fs::write(d.join(name), bytes).expect("seed file");
 }
 
-/// The sensor messages of every MCAP bag in DATA, cut down: (type tag, CDR bytes).
-fn messages(data: &Path) -> Vec<(u8, String, Vec<u8>)> {
+/// The sensor messages of every bag in DATA, cut down: (type tag, type name, CDR bytes, ROS 1
+/// bytes); the tag is the `ros_msgs` target's (0..=2 CDR, +3 the same type in ROS 1).
+fn messages(data: &Path) -> Vec<(u8, String, Vec<u8>, Vec<u8>)> {
     let mut bags = Vec::new();
     files(data, ".mcap", &mut bags);
+    files(data, ".bag", &mut bags);
     let mut out = Vec::new();
     for b in bags {
         let Ok(bag) = Bag::open(&b) else { continue };
@@ -50,10 +53,15 @@ fn messages(data: &Path) -> Vec<(u8, String, Vec<u8>)> {
                         data: &i.data[..n],
                         ..i
                     };
-                    out.push((0, m.type_name.to_string(), small.encode()));
+                    out.push((
+                        0,
+                        m.type_name.to_string(),
+                        small.encode(),
+                        small.encode_ros1(1),
+                    ));
                 }
-                Some(Ok(SensorMessage::Compressed(_))) => {
-                    out.push((1, m.type_name.to_string(), m.data.to_vec()));
+                Some(Ok(SensorMessage::Compressed(c))) => {
+                    out.push((1, m.type_name.to_string(), c.encode(), c.encode_ros1(1)));
                 }
                 Some(Ok(SensorMessage::Cloud(c))) => {
                     let w = c.width.min(POINTS);
@@ -65,7 +73,12 @@ fn messages(data: &Path) -> Vec<(u8, String, Vec<u8>)> {
                         data: &c.data[..n],
                         ..c.clone()
                     };
-                    out.push((2, m.type_name.to_string(), small.encode()));
+                    out.push((
+                        2,
+                        m.type_name.to_string(),
+                        small.encode(),
+                        small.encode_ros1(1),
+                    ));
                 }
                 _ => {}
             }
@@ -127,10 +140,12 @@ fn main() {
         seed("kitti", &format!("bin{i}"), &b[..k]);
     }
     let msgs = messages(data);
-    for (i, (tag, _, bytes)) in msgs.iter().enumerate() {
-        let mut v = vec![*tag];
-        v.extend_from_slice(bytes);
-        seed("ros_msgs", &format!("msg{i}"), &v);
+    for (i, (tag, _, cdr, ros1)) in msgs.iter().enumerate() {
+        for (t, bytes) in [(*tag, cdr), (*tag + 3, ros1)] {
+            let mut v = vec![t];
+            v.extend_from_slice(bytes);
+            seed("ros_msgs", &format!("msg{i}_{t}"), &v);
+        }
     }
     // Small bags holding the real messages, one per chunk compression, plus the real bags cut
     // to their first 64 KiB (their header, schemas and first chunk).
@@ -149,7 +164,7 @@ fn main() {
             },
         )
         .expect("a bag writer");
-        for (k, (_, ty, bytes)) in msgs.iter().enumerate() {
+        for (k, (_, ty, bytes, _)) in msgs.iter().enumerate() {
             if let Ok(t) = w.add_topic(&format!("/t{k}"), ty) {
                 let _ = w.write(t, k as u64, k as u64, bytes);
             }
@@ -164,6 +179,39 @@ fn main() {
                     &std::fs::read(m).expect("bag"),
                 );
             }
+        }
+    }
+    // The same messages in small ROS 1 bags, one per chunk compression.
+    for (i, c) in [
+        Ros1Compression::None,
+        Ros1Compression::Bz2,
+        Ros1Compression::Lz4,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let _ = std::fs::create_dir_all(&tmp);
+        let path = tmp.join(format!("r{i}.bag"));
+        let _ = std::fs::remove_file(&path);
+        let mut w = Ros1Writer::create(
+            &path,
+            &Ros1WriterOptions {
+                compression: c,
+                chunk_size: 4 << 10,
+            },
+        )
+        .expect("a ROS 1 bag writer");
+        for (k, (_, ty, _, bytes)) in msgs.iter().enumerate() {
+            if let Ok(t) = w.add_topic(&format!("/t{k}"), ty) {
+                let _ = w.write(t, 1 + k as u64, bytes);
+            }
+        }
+        if let Ok(p) = w.finish() {
+            seed(
+                "ros1bag",
+                &format!("small{i}"),
+                &std::fs::read(p).expect("bag"),
+            );
         }
     }
     let _ = std::fs::remove_dir_all(&tmp);
