@@ -267,6 +267,24 @@ pub struct RecordSection {
     pub seconds: Option<f64>,
 }
 
+/// The largest synthetic camera frame (RGB, 3 bytes a pixel): 256 MiB, e.g. 8192x8192.
+pub const MAX_SYNTHETIC_FRAME_BYTES: u64 = 256 << 20;
+
+/// The most memory a synthetic camera's pre-rendered frames may take: 1 GiB (30 frames of
+/// 1920x1208 take 209 MB).
+pub const MAX_PRERENDER_BYTES: u64 = 1 << 30;
+
+/// Bytes of one synthetic camera frame of `width` x `height` (RGB).
+pub fn synthetic_frame_bytes(width: u32, height: u32) -> u64 {
+    width as u64 * height as u64 * 3
+}
+
+/// How many frames of `width` x `height` fit in [`MAX_PRERENDER_BYTES`], at most `want`.
+pub fn prerender_that_fits(width: u32, height: u32, want: u32) -> u32 {
+    let per = synthetic_frame_bytes(width, height).max(1);
+    want.min(u32::try_from(MAX_PRERENDER_BYTES / per).unwrap_or(u32::MAX))
+}
+
 /// `[[synthetic.camera]]`.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -643,6 +661,33 @@ impl Config {
                     format!("{}x{} is not a usable size (1..=16384)", c.width, c.height),
                 ));
             }
+            let frame = synthetic_frame_bytes(c.width, c.height);
+            if frame > MAX_SYNTHETIC_FRAME_BYTES {
+                return Err(err(
+                    format!("synthetic.camera[{i}].width"),
+                    format!(
+                        "{}x{} frames take {} MiB each, more than the {} MiB a synthetic frame may take (e.g. 8192x8192)",
+                        c.width,
+                        c.height,
+                        frame >> 20,
+                        MAX_SYNTHETIC_FRAME_BYTES >> 20
+                    ),
+                ));
+            }
+            if frame * c.prerender as u64 > MAX_PRERENDER_BYTES {
+                return Err(err(
+                    format!("synthetic.camera[{i}].prerender"),
+                    format!(
+                        "{} pre-rendered frames of {}x{} take {} MiB, more than {} MiB: use prerender = {} or less (0 renders every frame live)",
+                        c.prerender,
+                        c.width,
+                        c.height,
+                        (frame * c.prerender as u64) >> 20,
+                        MAX_PRERENDER_BYTES >> 20,
+                        prerender_that_fits(c.width, c.height, c.prerender)
+                    ),
+                ));
+            }
             if !(c.rate_hz > 0.0 && c.rate_hz <= 1000.0) {
                 return Err(err(
                     format!("synthetic.camera[{i}].rate_hz"),
@@ -816,5 +861,28 @@ streams = ["camera_front", "lidar_top"]
         let e = parse("[record]\nout = \"x\"\nstreams = [\"a\"]\ncompression = \"gzip\"\n")
             .unwrap_err();
         assert_eq!(e.key, "record.compression");
+    }
+
+    /// A 16384x16384 synthetic camera pre-rendered 24 GB before it published anything (and
+    /// heeded no SIGINT meanwhile): the frame size and the pre-render memory are bounded, and
+    /// the command line's pre-render shrinks to what fits.
+    #[test]
+    fn synthetic_frames_are_bounded_in_memory() {
+        let cam = |size: &str, extra: &str| {
+            let (w, h) = size.split_once('x').unwrap();
+            parse(&format!(
+                "[[synthetic.camera]]\nstream = \"c\"\nwidth = {w}\nheight = {h}\n{extra}"
+            ))
+        };
+        let e = cam("16384x16384", "").unwrap_err();
+        assert_eq!(e.key, "synthetic.camera[0].width");
+        assert!(e.problem.contains("768 MiB each"), "{e}");
+        let e = cam("8192x8192", "").unwrap_err();
+        assert_eq!(e.key, "synthetic.camera[0].prerender");
+        assert!(e.problem.contains("prerender = 5 or less"), "{e}");
+        assert!(cam("8192x8192", "prerender = 5").is_ok());
+        assert!(cam("1920x1208", "").is_ok());
+        assert_eq!(prerender_that_fits(8192, 8192, 30), 5);
+        assert_eq!(prerender_that_fits(1920, 1208, 30), 30);
     }
 }

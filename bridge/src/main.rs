@@ -289,7 +289,8 @@ fn command_config(cmd: &Command) -> Result<Config> {
                     height: h,
                     rate_hz: *camera_hz,
                     frame_id: "camera_front".into(),
-                    prerender: 30,
+                    // As many of 30 as fit in the pre-render memory bound.
+                    prerender: perturb_bridge::config::prerender_that_fits(w, h, 30),
                     count: *count,
                 });
             }

@@ -266,6 +266,14 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
         let deadline = Instant::now() + Duration::from_secs(120);
         let mut got = 0;
         while got < n && Instant::now() < deadline && !stop.load(Ordering::SeqCst) {
+            // A signal while the adapters start (e.g. a long pre-render) stops them too.
+            if SIGNALLED.load(Ordering::SeqCst) {
+                if let Ok(mut g) = why.lock() {
+                    g.get_or_insert("SIGINT/SIGTERM".into());
+                }
+                stop.store(true, Ordering::SeqCst);
+                break;
+            }
             match rx.recv_timeout(Duration::from_millis(50)) {
                 Ok(()) => got += 1,
                 Err(crossbeam::channel::RecvTimeoutError::Timeout) => {}

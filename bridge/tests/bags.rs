@@ -377,6 +377,38 @@ fn a_recorder_without_a_source_of_its_own_runs_until_stopped_and_says_why() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A large synthetic camera pre-renders for seconds; a SIGINT meanwhile stops the bridge at
+/// once (it used to be ignored until every frame was rendered).
+#[test]
+fn a_synthetic_source_heeds_sigint_while_it_pre_renders() {
+    let mut child = Command::new(bridge_exe())
+        .args([
+            "synthetic",
+            "--bus",
+            "local",
+            "--lidar",
+            "",
+            "--size",
+            "4096x4096",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // 21 frames of 4096x4096 (what fits in the pre-render bound) take well over 10 s here.
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let st = interrupt(&mut child, std::time::Duration::from_secs(5))
+        .expect("the bridge stops within 5 s of SIGINT while pre-rendering");
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        st.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("stopped: SIGINT/SIGTERM"), "{stdout}");
+}
+
 #[test]
 fn check_resolves_what_the_run_would_resolve() {
     let dir = scratch("check-resolves");
