@@ -123,6 +123,7 @@ impl Adapter for Ingress {
         }
         rep.undelivered = publisher.undelivered();
         rep.lost = reader.lost();
+        rep.dropped = reader.dropped();
         Ok(rep)
     }
 }

@@ -394,6 +394,12 @@ pub fn print_reports(reports: &[AdapterReport]) {
                 r.undelivered
             );
         }
+        if r.dropped > 0 {
+            println!(
+                "    dropped from full queues (ROS 1 subscribers slower than the stream, or the ingress's own queue): {}",
+                r.dropped
+            );
+        }
         if r.lost > 0 {
             println!(
                 "    lost before the bridge (gaps in the ROS 1 header seq): {}",
