@@ -196,6 +196,54 @@ fn replay_engine_selects_topics_skips_the_offset_and_loops() {
     assert!(rep.damage.is_empty());
 }
 
+/// A looping replay of a bag whose messages share one instant passes ten times a second; it
+/// used to log every pass (9 lines a second). The first pass is logged, then once a minute.
+#[test]
+fn a_looping_replay_of_a_one_instant_bag_does_not_flood_the_log() {
+    let dir = scratch("one-instant");
+    let bag = dir.join("b");
+    let mut w = BagWriter::create(
+        &bag,
+        &WriterOptions {
+            compression: perturb_bag::Compression::None,
+            chunk_size: 4096,
+        },
+    )
+    .unwrap();
+    let ch = w.add_topic("/cam", "sensor_msgs/msg/Image").unwrap();
+    let img = street_image(16, 8, 0);
+    let m = ImageMsg::from_view(
+        Header {
+            stamp_sec: 1,
+            stamp_nanosec: 0,
+            frame_id: "cam",
+        },
+        &img.view(),
+    );
+    w.write(ch, 1_000, 1_000, &m.encode()).unwrap();
+    w.finish().unwrap();
+    let mut child = Command::new(bridge_exe())
+        .args(["replay", "--bus", "local", "--loop"])
+        .arg(&bag)
+        .env("RUST_LOG", "info")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    interrupt(&mut child, std::time::Duration::from_secs(10)).expect("stops on SIGINT");
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let loops = stderr.matches("looping").count();
+    assert!(
+        stdout.contains("stopped: SIGINT/SIGTERM"),
+        "{stdout}{stderr}"
+    );
+    assert_eq!(loops, 1, "one line for the first pass: {stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn truncated_bag_replays_what_can_be_read_and_reports_the_damage() {
     let dir = scratch("damaged");
