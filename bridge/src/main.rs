@@ -310,13 +310,21 @@ fn command_config(cmd: &Command) -> Result<Config> {
 }
 
 fn main() {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| "info,rustdds=warn,ros2_client=warn".into()),
-        )
-        .with_writer(std::io::stderr)
+    use tracing_subscriber::prelude::*;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| "info,rustdds=warn,ros2_client=warn".into());
+    let (filter, reload) = tracing_subscriber::reload::Layer::new(filter);
+    tracing_subscriber::registry()
+        .with(filter)
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
         .init();
+    // Tearing the DDS participants down at the end makes RustDDS log errors that mean nothing
+    // (leaving multicast groups, removing writers from closed channels): silence it then.
+    run::on_stopping(Box::new(move || {
+        let _ = reload.modify(|f| {
+            *f = tracing_subscriber::EnvFilter::new(format!("{f},rustdds=off,ros2_client=off"));
+        });
+    }));
     let cli = Cli::parse();
     if let Err(e) = real_main(cli) {
         eprintln!("error: {e:#}");

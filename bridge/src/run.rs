@@ -209,6 +209,22 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
 
 static SIGNALLED: AtomicBool = AtomicBool::new(false);
 
+/// What [`on_stopping`] registered.
+static STOPPING_HOOK: std::sync::OnceLock<Box<dyn Fn() + Send + Sync>> = std::sync::OnceLock::new();
+
+/// Registers `f` to run once the bridge decides to stop, before its adapters are told to (the
+/// binary quiets the DDS libraries' log there: tearing a RustDDS participant down logs a dozen
+/// harmless ERROR lines). Only the first registration counts.
+pub fn on_stopping(f: Box<dyn Fn() + Send + Sync>) {
+    let _ = STOPPING_HOOK.set(f);
+}
+
+fn stopping() {
+    if let Some(f) = STOPPING_HOOK.get() {
+        f();
+    }
+}
+
 extern "C" fn on_signal(_: libc::c_int) {
     SIGNALLED.store(true, Ordering::SeqCst);
 }
@@ -308,6 +324,7 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
     loop {
         if SIGNALLED.load(Ordering::SeqCst) {
             set_why("SIGINT/SIGTERM".into());
+            stopping();
             stop.store(true, Ordering::SeqCst);
         }
         if stop.load(Ordering::SeqCst) {
@@ -322,17 +339,21 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
                     "every source finished (the sinks had {:.1} s for the last frames)",
                     linger.as_secs_f64()
                 ));
+                stopping();
                 stop.store(true, Ordering::SeqCst);
                 break;
             }
         }
         if !sinks_left && !sources_left {
             set_why("every adapter finished".into());
+            stopping();
             stop.store(true, Ordering::SeqCst);
             break;
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+    // Also when an adapter stopped the run (a recorder's max_frames, a failure).
+    stopping();
     let stopped_by = why
         .lock()
         .ok()

@@ -380,6 +380,14 @@ fn a_daemon_killed_mid_stream_is_replaced_and_every_frame_is_still_accounted_for
         "frames_out counts frames of both daemons: {cam}"
     );
     assert_eq!(seqs(&recs).len(), recs.len(), "a frame arrived twice");
+    // The restart is logged in a few readable lines (it used to print a 6 kB one-line iceoryx2
+    // dump of the dead node's resources).
+    let log = _daemon2.log_text();
+    let longest = log.lines().map(str::len).max().unwrap_or(0);
+    assert!(
+        longest < 600,
+        "a {longest}-byte log line on restart:\n{log}"
+    );
 }
 
 #[test]
