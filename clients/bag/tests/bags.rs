@@ -272,6 +272,17 @@ fn hostile_lengths_are_reported_as_damage_instead_of_being_allocated() {
         "{report:?}"
     );
 
+    // The same, with a Footer record whose length is not 20 (found by fuzzing: the `mcap` crate
+    // still read the summary it points to, without the lengths checked): not used either.
+    let n = b.len();
+    b[n - 37 + 1..n - 37 + 9].copy_from_slice(&96u64.to_le_bytes());
+    let (indexed, n, report) = read_all(&b, "footer.mcap").unwrap();
+    assert!(!indexed && n == 20 && report.damage.is_none(), "{report:?}");
+    assert!(
+        report.notes.iter().any(|x| x.contains("Footer record")),
+        "{report:?}"
+    );
+
     // Every chunk (and its index) claims to decompress to 2^60 bytes: damage, no allocation.
     let mut b = good.clone();
     for r in recs.iter().filter(|r| r.1 == 0x06) {
