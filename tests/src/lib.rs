@@ -81,6 +81,23 @@ pub fn workspace() -> PathBuf {
         .to_path_buf()
 }
 
+/// A path inside the shared real-data folder (`../shared/data` next to the workspace), or `None`
+/// with a message when it is absent. Under `CI=true` an absent path fails the test instead:
+/// CI must never pass by skipping the real-data tests.
+pub fn shared_data(sub: &str) -> Option<PathBuf> {
+    let p = workspace().join("../shared/data").join(sub);
+    if p.exists() {
+        return Some(p);
+    }
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "{} is absent and CI=true: the real-data tests need ../shared/data",
+        p.display()
+    );
+    eprintln!("SKIP: {} is absent", p.display());
+    None
+}
+
 /// A private iceoryx2 namespace and scratch folder for one test; both are removed on drop.
 pub struct Namespace {
     /// The transport options every process of the test uses.

@@ -2,7 +2,7 @@
 //! iceoryx2 -> `perturbd` -> iceoryx2 -> `perturb-bridge` recorder -> rosbag2 MCAP, read back by
 //! the independent `rosbags` package.
 
-use perturb_tests::{Namespace, events, exe, have_rosbags, read_bag, workspace};
+use perturb_tests::{Namespace, events, exe, have_rosbags, read_bag};
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -24,13 +24,7 @@ fn run_bridge(ns: &Namespace, config: &Path) {
 }
 
 fn kitti_bag() -> Option<PathBuf> {
-    let p = workspace().join("../shared/data/ros2_mcap_kitti_000001");
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("SKIP: {} is absent", p.display());
-        None
-    }
+    perturb_tests::shared_data("ros2_mcap_kitti_000001")
 }
 
 #[test]

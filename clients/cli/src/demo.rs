@@ -29,7 +29,8 @@ pub struct Args {
     /// How long the pipeline runs, in seconds.
     #[arg(long, default_value_t = 12.0)]
     seconds: f64,
-    /// Replay this rosbag2 MCAP bag (looped, original timing) instead of the synthetic sensors:
+    /// Replay this bag (rosbag2 MCAP, ROS 1 `.bag` or ROS 1 MCAP; looped, original timing) instead
+    /// of the synthetic sensors:
     /// the hardware-in-the-loop path.
     #[arg(long)]
     bag: Option<PathBuf>,

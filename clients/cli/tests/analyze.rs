@@ -448,7 +448,7 @@ with rosbag.Bag(sys.argv[1], 'w') as b:
             .find(|c| c["perturbation"] == id)
             .unwrap_or_else(|| panic!("no condition {id} in {conds:?}"))
     };
-    let nominal = cond(Value::Null);
+    let nominal = cond(Value::from("nominal"));
     let rain = cond(Value::from("C-C7"));
     assert_eq!(rain["severity"], 3);
     assert!(
