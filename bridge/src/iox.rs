@@ -19,7 +19,7 @@ use perturb_wire::{
 };
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use tracing::warn;
+use tracing::{info, warn};
 
 /// The iceoryx2 bus of the bridge `section` (its namespace and QoS).
 pub fn bus(section: &BridgeSection) -> Result<Arc<dyn Bus>> {
@@ -281,8 +281,14 @@ impl BusSubscriber for IoxSubscriber {
             Ok(x) => x,
             Err(e) if e.is_borrow_limit() => None,
             Err(e) => {
+                // A broken connection is reconnected, not counted as a bad message.
                 self.subscriber.reopen()?;
-                return Err(e.into());
+                info!(
+                    service = self.subscriber.service(),
+                    reconnects = self.subscriber.reconnects(),
+                    "reconnected after: {e}"
+                );
+                return Ok(0);
             }
         };
         while let Some(frame) = next {

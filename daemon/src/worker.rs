@@ -249,6 +249,17 @@ fn receive_loop(
     let mut layouts = LayoutCache::default();
     while !shutdown.load(Ordering::Relaxed) {
         let mut broken = false;
+        // A reopen that failed left no ports: try again before waiting on them.
+        if !sub.has_ports() {
+            if let Err(e) = sub.reopen() {
+                error!(
+                    stream = name,
+                    "cannot reopen the input: {e}; retrying in 1 s"
+                );
+                std::thread::sleep(Duration::from_secs(1));
+            }
+            continue;
+        }
         {
             let waitset = match WaitSetBuilder::new()
                 .signal_handling_mode(SignalHandlingMode::Disabled)
