@@ -5,8 +5,8 @@ use crate::bus::Bus;
 use crate::stats::AdapterReport;
 use anyhow::Result;
 use crossbeam::channel::Sender;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// The run-time context of an adapter.
@@ -14,12 +14,31 @@ use std::time::Duration;
 pub struct Control {
     stop: Arc<AtomicBool>,
     ready: Option<Sender<()>>,
+    why: Arc<Mutex<Option<String>>>,
 }
 
 impl Control {
     /// A context with a stop flag and a readiness channel.
     pub fn new(stop: Arc<AtomicBool>, ready: Option<Sender<()>>) -> Self {
-        Control { stop, ready }
+        Control {
+            stop,
+            ready,
+            why: Arc::default(),
+        }
+    }
+
+    /// A context sharing `why` (the first reason given by [`Control::stop_because`]).
+    pub fn with_reason(mut self, why: Arc<Mutex<Option<String>>>) -> Self {
+        self.why = why;
+        self
+    }
+
+    /// Asks every adapter to stop, saying why (the first reason given is the one reported).
+    pub fn stop_because(&self, why: impl Into<String>) {
+        if let Ok(mut w) = self.why.lock() {
+            w.get_or_insert_with(|| why.into());
+        }
+        self.stop_all();
     }
 
     /// True once the bridge is stopping.

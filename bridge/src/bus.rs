@@ -40,6 +40,11 @@ pub trait BusPublisher {
     fn dropped(&self) -> u64 {
         0
     }
+    /// Frames published while no reader was connected (on the iceoryx2 bus: no `perturbd`, or
+    /// it was restarting): lost before the daemon, which counts them as `dropped_upstream`.
+    fn undelivered(&self) -> u64 {
+        0
+    }
 }
 
 /// Receives frames from one stream side.

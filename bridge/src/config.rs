@@ -262,6 +262,27 @@ pub struct RecordSection {
     /// Stop after this many perturbed (or, when only raw is recorded, raw) frames per stream.
     #[serde(default)]
     pub max_frames: Option<u64>,
+    /// Stop after this many seconds of recording.
+    #[serde(default)]
+    pub seconds: Option<f64>,
+}
+
+/// The largest synthetic camera frame (RGB, 3 bytes a pixel): 256 MiB, e.g. 8192x8192.
+pub const MAX_SYNTHETIC_FRAME_BYTES: u64 = 256 << 20;
+
+/// The most memory a synthetic camera's pre-rendered frames may take: 1 GiB (30 frames of
+/// 1920x1208 take 209 MB).
+pub const MAX_PRERENDER_BYTES: u64 = 1 << 30;
+
+/// Bytes of one synthetic camera frame of `width` x `height` (RGB).
+pub fn synthetic_frame_bytes(width: u32, height: u32) -> u64 {
+    width as u64 * height as u64 * 3
+}
+
+/// How many frames of `width` x `height` fit in [`MAX_PRERENDER_BYTES`], at most `want`.
+pub fn prerender_that_fits(width: u32, height: u32, want: u32) -> u32 {
+    let per = synthetic_frame_bytes(width, height).max(1);
+    want.min(u32::try_from(MAX_PRERENDER_BYTES / per).unwrap_or(u32::MAX))
 }
 
 /// `[[synthetic.camera]]`.
@@ -494,6 +515,15 @@ impl Config {
             problem,
         };
         let check_stream = |key: String, s: &str| -> Result<(), ConfigError> {
+            let path_like = s.split('/').any(|part| part == "." || part == "..");
+            if path_like {
+                return Err(err(
+                    key,
+                    format!(
+                        "stream name `{s}` contains `.` or `..` segments: a stream name is not a path"
+                    ),
+                ));
+            }
             if s.is_empty() || s.len() > 200 || s.starts_with('/') || s.contains("//") {
                 return Err(err(
                     key,
@@ -631,6 +661,33 @@ impl Config {
                     format!("{}x{} is not a usable size (1..=16384)", c.width, c.height),
                 ));
             }
+            let frame = synthetic_frame_bytes(c.width, c.height);
+            if frame > MAX_SYNTHETIC_FRAME_BYTES {
+                return Err(err(
+                    format!("synthetic.camera[{i}].width"),
+                    format!(
+                        "{}x{} frames take {} MiB each, more than the {} MiB a synthetic frame may take (e.g. 8192x8192)",
+                        c.width,
+                        c.height,
+                        frame >> 20,
+                        MAX_SYNTHETIC_FRAME_BYTES >> 20
+                    ),
+                ));
+            }
+            if frame * c.prerender as u64 > MAX_PRERENDER_BYTES {
+                return Err(err(
+                    format!("synthetic.camera[{i}].prerender"),
+                    format!(
+                        "{} pre-rendered frames of {}x{} take {} MiB, more than {} MiB: use prerender = {} or less (0 renders every frame live)",
+                        c.prerender,
+                        c.width,
+                        c.height,
+                        (frame * c.prerender as u64) >> 20,
+                        MAX_PRERENDER_BYTES >> 20,
+                        prerender_that_fits(c.width, c.height, c.prerender)
+                    ),
+                ));
+            }
             if !(c.rate_hz > 0.0 && c.rate_hz <= 1000.0) {
                 return Err(err(
                     format!("synthetic.camera[{i}].rate_hz"),
@@ -657,13 +714,30 @@ impl Config {
             if r.streams.is_empty() {
                 return Err(err("record.streams".into(), "is empty".into()));
             }
+            let mut seen = BTreeSet::new();
             for (i, s) in r.streams.iter().enumerate() {
                 check_stream(format!("record.streams[{i}]"), s)?;
+                if !seen.insert(s) {
+                    return Err(err(
+                        format!("record.streams[{i}]"),
+                        format!(
+                            "stream `{s}` is listed twice (every frame would be recorded twice)"
+                        ),
+                    ));
+                }
             }
             if !r.raw && !r.perturbed {
                 return Err(err(
                     "record.raw".into(),
                     "both `raw` and `perturbed` are false: nothing to record".into(),
+                ));
+            }
+            if let Some(t) = r.seconds
+                && !(t > 0.0 && t.is_finite())
+            {
+                return Err(err(
+                    "record.seconds".into(),
+                    format!("{t} must be a positive number of seconds"),
                 ));
             }
             let format = match &r.format {
@@ -778,8 +852,37 @@ streams = ["camera_front", "lidar_top"]
         assert!(e.problem.contains("video"), "{e}");
         let e = parse("").unwrap_err();
         assert!(e.problem.contains("no adapter"), "{e}");
+        let e = parse("[record]\nout = \"x\"\nstreams = [\"a\", \"a\"]\n").unwrap_err();
+        assert_eq!(e.key, "record.streams[1]");
+        assert!(e.problem.contains("twice"), "{e}");
+        let e = parse("[record]\nout = \"x\"\nstreams = [\"../../etc\"]\n").unwrap_err();
+        assert_eq!(e.key, "record.streams[0]");
+        assert!(e.problem.contains("not a path"), "{e}");
         let e = parse("[record]\nout = \"x\"\nstreams = [\"a\"]\ncompression = \"gzip\"\n")
             .unwrap_err();
         assert_eq!(e.key, "record.compression");
+    }
+
+    /// A 16384x16384 synthetic camera pre-rendered 24 GB before it published anything (and
+    /// heeded no SIGINT meanwhile): the frame size and the pre-render memory are bounded, and
+    /// the command line's pre-render shrinks to what fits.
+    #[test]
+    fn synthetic_frames_are_bounded_in_memory() {
+        let cam = |size: &str, extra: &str| {
+            let (w, h) = size.split_once('x').unwrap();
+            parse(&format!(
+                "[[synthetic.camera]]\nstream = \"c\"\nwidth = {w}\nheight = {h}\n{extra}"
+            ))
+        };
+        let e = cam("16384x16384", "").unwrap_err();
+        assert_eq!(e.key, "synthetic.camera[0].width");
+        assert!(e.problem.contains("768 MiB each"), "{e}");
+        let e = cam("8192x8192", "").unwrap_err();
+        assert_eq!(e.key, "synthetic.camera[0].prerender");
+        assert!(e.problem.contains("prerender = 5 or less"), "{e}");
+        assert!(cam("8192x8192", "prerender = 5").is_ok());
+        assert!(cam("1920x1208", "").is_ok());
+        assert_eq!(prerender_that_fits(8192, 8192, 30), 5);
+        assert_eq!(prerender_that_fits(1920, 1208, 30), 30);
     }
 }

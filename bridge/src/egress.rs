@@ -81,6 +81,7 @@ impl Adapter for Egress {
                 log_bad(&name, rep.failed, &e);
             }
         }
+        rep.dropped = writer.dropped();
         rep.latency = Some(total.summary());
         rep.hops.insert(
             format!("{}/{}", self.stream, self.side.as_str()),

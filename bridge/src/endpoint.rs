@@ -23,6 +23,11 @@ pub trait TopicReader: Send {
     fn lost(&self) -> u64 {
         0
     }
+
+    /// Messages the reader received and dropped itself because its queue was full.
+    fn dropped(&self) -> u64 {
+        0
+    }
 }
 
 /// Writes sensor messages on one topic.
@@ -30,6 +35,12 @@ pub trait TopicWriter: Send {
     /// Publishes one message; `seq` is the frame's sequence number, written into the header
     /// where the message format has one (ROS 1).
     fn write(&mut self, seq: u64, msg: &Payload<'_>) -> anyhow::Result<()>;
+
+    /// Messages written but dropped before they reached a subscriber (a ROS 1 subscriber slower
+    /// than the stream); summed over subscribers, including those that left.
+    fn dropped(&self) -> u64 {
+        0
+    }
 }
 
 /// Where an ingress or egress opens its topic.

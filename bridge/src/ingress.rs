@@ -121,7 +121,9 @@ impl Adapter for Ingress {
                 log_bad(&name, rep.failed, &e);
             }
         }
+        rep.undelivered = publisher.undelivered();
         rep.lost = reader.lost();
+        rep.dropped = reader.dropped();
         Ok(rep)
     }
 }

@@ -19,7 +19,7 @@ use perturb_wire::{
 };
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use tracing::warn;
+use tracing::{info, warn};
 
 /// The iceoryx2 bus of the bridge `section` (its namespace and QoS).
 pub fn bus(section: &BridgeSection) -> Result<Arc<dyn Bus>> {
@@ -88,6 +88,7 @@ impl Bus for IoxBus {
         Ok(Box::new(IoxPublisher {
             publisher: Some(publisher),
             retired: self.retired.clone(),
+            undelivered: 0,
         }))
     }
 
@@ -118,6 +119,7 @@ impl Bus for IoxBus {
 struct IoxPublisher {
     publisher: Option<FramePublisher>,
     retired: Arc<Mutex<Vec<FramePublisher>>>,
+    undelivered: u64,
 }
 
 impl Drop for IoxPublisher {
@@ -180,10 +182,25 @@ impl BusPublisher for IoxPublisher {
         let Some(publisher) = self.publisher.as_mut() else {
             anyhow::bail!("publisher already retired");
         };
-        publisher
+        let reached = publisher
             .publish_raw(header, payload.data())
             .with_context(|| format!("publishing frame {}", meta.seq))?;
+        if reached == 0 {
+            self.undelivered += 1;
+            if self.undelivered == 1 || self.undelivered.is_multiple_of(100) {
+                warn!(
+                    service = publisher.service(),
+                    seq = meta.seq,
+                    undelivered = self.undelivered,
+                    "no reader (perturbd) on the stream: frame lost"
+                );
+            }
+        }
         Ok(())
+    }
+
+    fn undelivered(&self) -> u64 {
+        self.undelivered
     }
 }
 
@@ -264,8 +281,14 @@ impl BusSubscriber for IoxSubscriber {
             Ok(x) => x,
             Err(e) if e.is_borrow_limit() => None,
             Err(e) => {
+                // A broken connection is reconnected, not counted as a bad message.
                 self.subscriber.reopen()?;
-                return Err(e.into());
+                info!(
+                    service = self.subscriber.service(),
+                    reconnects = self.subscriber.reconnects(),
+                    "reconnected after: {e}"
+                );
+                return Ok(0);
             }
         };
         while let Some(frame) = next {

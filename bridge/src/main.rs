@@ -98,9 +98,12 @@ enum Command {
         /// Only the perturbed side (and the events).
         #[arg(long)]
         perturbed_only: bool,
-        /// Stop after this many frames per stream.
+        /// Stop after this many frames per stream (default: until SIGINT/SIGTERM).
         #[arg(long)]
         max_frames: Option<u64>,
+        /// Stop after this many seconds (default: until SIGINT/SIGTERM).
+        #[arg(long)]
+        seconds: Option<f64>,
         /// Bus.
         #[arg(long, default_value = "iceoryx2")]
         bus: String,
@@ -226,6 +229,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
                     }),
                     compression: None,
                     max_frames: None,
+                    seconds: None,
                 });
             }
         }
@@ -236,6 +240,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
             raw_only,
             perturbed_only,
             max_frames,
+            seconds,
             bus,
         } => {
             cfg.bridge.bus = bus_kind(bus)?;
@@ -260,6 +265,7 @@ fn command_config(cmd: &Command) -> Result<Config> {
                 format: Some(format.clone()),
                 compression: None,
                 max_frames: *max_frames,
+                seconds: *seconds,
             });
         }
         Command::Synthetic {
@@ -283,7 +289,8 @@ fn command_config(cmd: &Command) -> Result<Config> {
                     height: h,
                     rate_hz: *camera_hz,
                     frame_id: "camera_front".into(),
-                    prerender: 30,
+                    // As many of 30 as fit in the pre-render memory bound.
+                    prerender: perturb_bridge::config::prerender_that_fits(w, h, 30),
                     count: *count,
                 });
             }
@@ -303,13 +310,21 @@ fn command_config(cmd: &Command) -> Result<Config> {
 }
 
 fn main() {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| "info,rustdds=warn,ros2_client=warn".into()),
-        )
-        .with_writer(std::io::stderr)
+    use tracing_subscriber::prelude::*;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| "info,rustdds=warn,ros2_client=warn".into());
+    let (filter, reload) = tracing_subscriber::reload::Layer::new(filter);
+    tracing_subscriber::registry()
+        .with(filter)
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
         .init();
+    // Tearing the DDS participants down at the end makes RustDDS log errors that mean nothing
+    // (leaving multicast groups, removing writers from closed channels): silence it then.
+    run::on_stopping(Box::new(move || {
+        let _ = reload.modify(|f| {
+            *f = tracing_subscriber::EnvFilter::new(format!("{f},rustdds=off,ros2_client=off"));
+        });
+    }));
     let cli = Cli::parse();
     if let Err(e) = real_main(cli) {
         eprintln!("error: {e:#}");
@@ -320,14 +335,18 @@ fn main() {
 fn real_main(cli: Cli) -> Result<()> {
     let cfg = config_of(&cli)?;
     if cli.check {
+        // What the run resolves before it starts: the replay bag and its topics, stream kinds.
+        run::resolve(&cfg)?;
         println!("configuration OK");
         return Ok(());
     }
     run::install_signal_handlers();
     let plan = run::plan(&cfg)?;
     let bus = run::make_bus(&cfg)?;
-    let reports = run::run(plan, bus, Duration::from_secs_f64(cli.linger.max(0.0)))?;
+    let outcome = run::run(plan, bus, Duration::from_secs_f64(cli.linger.max(0.0)))?;
+    let reports = outcome.reports;
     run::print_reports(&reports);
+    println!("stopped: {}", outcome.stopped_by);
     if let Some(path) = &cfg.bridge.report {
         std::fs::write(path, serde_json::to_string_pretty(&reports)?)
             .with_context(|| format!("cannot write the report {}", path.display()))?;

@@ -117,6 +117,9 @@ impl Adapter for Record {
                 let ready_tx = ready_tx.clone();
                 let done_streams = done_streams.clone();
                 let max = self.cfg.max_frames.filter(|_| side == counted);
+                let seconds = self.cfg.seconds;
+                let deadline = seconds
+                    .map(|t| std::time::Instant::now() + std::time::Duration::from_secs_f64(t));
                 let name = name.clone();
                 handles.push(scope.spawn(move || -> SideResult {
                     let key = format!("{stream}/{}", side.as_str());
@@ -132,7 +135,10 @@ impl Adapter for Record {
                     };
                     let (mut got, mut bad, mut lat) = (0u64, 0u64, Latency::default());
                     let mut hops = HopLatency::default();
-                    while !ctl.stopped() && max.is_none_or(|m| got < m) {
+                    while !ctl.stopped()
+                        && max.is_none_or(|m| got < m)
+                        && deadline.is_none_or(|d| std::time::Instant::now() < d)
+                    {
                         let r = sub.recv(POLL, &mut |meta, payload| {
                             if max.is_some_and(|m| got >= m) {
                                 return;
@@ -181,8 +187,16 @@ impl Adapter for Record {
                     if max.is_some_and(|m| got >= m)
                         && done_streams.fetch_add(1, Ordering::SeqCst) + 1 == n_counted
                     {
-                        tracing::info!("{name}: every stream reached max_frames; stopping");
-                        ctl.stop_all();
+                        ctl.stop_because(format!(
+                            "{name}: every stream reached max_frames ({})",
+                            max.unwrap_or(0)
+                        ));
+                    }
+                    if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+                        ctl.stop_because(format!(
+                            "{name}: recorded for the {} s asked for",
+                            seconds.unwrap_or(0.0)
+                        ));
                     }
                     (key, got, bad, lat, hops)
                 }));

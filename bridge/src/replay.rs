@@ -131,6 +131,8 @@ impl Replay {
         let mut seqs: BTreeMap<&str, u64> = BTreeMap::new();
         let mut pass = 0u32;
         let mut next_pass_at: Option<Instant> = None;
+        let mut last_pass_log = Instant::now();
+        let mut passes_logged = 0u32;
         loop {
             if let Some(at) = next_pass_at {
                 let now = Instant::now();
@@ -277,11 +279,25 @@ impl Replay {
                     Instant::now() + Duration::from_secs_f64(gap_ns as f64 / 1e9 / self.cfg.rate),
                 );
             }
-            tracing::info!("{name}: pass {pass} done, looping");
+            // A short bag loops many times a second: say so for the first pass, then at most
+            // once a minute (the rest at debug level), so the log keeps what matters.
+            if pass == 1 || last_pass_log.elapsed() >= PASS_LOG_EVERY {
+                tracing::info!(
+                    "{name}: pass {pass} done, looping ({} passes since the last such line)",
+                    pass - passes_logged
+                );
+                last_pass_log = Instant::now();
+                passes_logged = pass;
+            } else {
+                tracing::debug!("{name}: pass {pass} done, looping");
+            }
         }
         Ok(rep)
     }
 }
+
+/// How often a looping replay logs a finished pass at info level.
+const PASS_LOG_EVERY: Duration = Duration::from_secs(60);
 
 /// The replay adapter: the engine publishing into the bus (and, optionally, `/clock` on ROS 1).
 pub struct ReplayAdapter {
@@ -316,7 +332,7 @@ impl Adapter for ReplayAdapter {
             }
         };
         ctl.ready();
-        let rep = self.replay.run_with_clock(
+        let mut rep = self.replay.run_with_clock(
             &ctl,
             &name,
             &mut |stream, meta, payload| {
@@ -329,6 +345,7 @@ impl Adapter for ReplayAdapter {
                 .is_some()
                 .then_some(&mut tick as &mut dyn FnMut(u64)),
         )?;
+        rep.undelivered = pubs.values().map(|p| p.undelivered()).sum();
         Ok(rep)
     }
 }

@@ -1,6 +1,9 @@
 //! Builds the adapters a configuration asks for and runs them, one thread each: sinks first
-//! (so no early frame is missed), then sources; stops on SIGINT/SIGTERM, when every finite source
-//! is done (after `linger`), or when the recorder has its `max_frames`.
+//! (so no early frame is missed), then sources. It stops on SIGINT/SIGTERM; when this process has
+//! sources, all finite, and they are done (after `linger`, for the last frames to come through the
+//! daemon); when every sink is done (a recorder's `max_frames` or `seconds`); or when an adapter
+//! fails. A bridge without sources of its own (record or egress only) runs until one of the
+//! others: it never stops because nothing arrives. It always says why it stopped.
 
 use crate::adapter::{Adapter, Control};
 use crate::bus::{Bus, Side};
@@ -30,10 +33,66 @@ pub struct Plan {
     pub endless: bool,
 }
 
+/// What a configuration resolves to before anything runs: the replay (its bag opened and its
+/// topics matched) and the kind of every stream. `--check` stops here; [`plan`] goes on.
+pub struct Resolved {
+    /// The opened replay.
+    pub replay: Option<Replay>,
+    /// Stream -> kind, from every source, `[streams]` and explicit egress kinds.
+    pub kinds: BTreeMap<String, StreamKind>,
+}
+
+/// Opens the replay bag and works out every stream's kind; errors name the key: a bag that is
+/// missing, unreadable or lacks the named topics, an egress `kind` that contradicts what the
+/// stream carries, a recorded stream nothing says the kind of.
+pub fn resolve(cfg: &Config) -> Result<Resolved> {
+    let mut kinds: BTreeMap<String, StreamKind> = cfg.source_kinds();
+    let replay = match &cfg.replay {
+        Some(r) => {
+            let replay = Replay::open(r.clone())
+                .with_context(|| format!("replay.bag `{}`", r.bag.display()))?;
+            for (stream, kind) in replay.routes.values() {
+                kinds.insert(stream.clone(), *kind);
+            }
+            Some(replay)
+        }
+        None => None,
+    };
+    for (i, e) in cfg.egress.iter().enumerate() {
+        let Some(k) = e.kind else { continue };
+        match kinds.get(&e.stream) {
+            Some(&have) if have != k => anyhow::bail!(
+                "egress[{i}].kind: `{}` says stream `{}` carries {}, but its source publishes {}",
+                match k {
+                    StreamKind::Image => "image",
+                    StreamKind::Cloud => "cloud",
+                },
+                e.stream,
+                k.ros_type(),
+                have.ros_type()
+            ),
+            Some(_) => {}
+            None => {
+                kinds.insert(e.stream.clone(), k);
+            }
+        }
+    }
+    if let Some(r) = &cfg.record {
+        for (i, s) in r.streams.iter().enumerate() {
+            if !kinds.contains_key(s) {
+                anyhow::bail!(
+                    "record.streams[{i}]: nothing says what stream `{s}` carries: add it to [streams] (`{s} = \"image\"` or `\"cloud\"`)"
+                );
+            }
+        }
+    }
+    Ok(Resolved { replay, kinds })
+}
+
 /// Builds the adapters (opens bags, DDS participants and the ROS 1 node; errors name what
 /// failed).
 pub fn plan(cfg: &Config) -> Result<Plan> {
-    let mut kinds: BTreeMap<String, StreamKind> = cfg.source_kinds();
+    let Resolved { replay, kinds } = resolve(cfg)?;
     let mut sources: Vec<Box<dyn Adapter>> = Vec::new();
     let mut sinks: Vec<Box<dyn Adapter>> = Vec::new();
     let mut endless = false;
@@ -52,20 +111,10 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
             ros1.clone().context("the ROS 1 node was not started")?,
         ))
     };
-    if let Some(r) = &cfg.replay {
-        let replay =
-            Replay::open(r.clone()).with_context(|| format!("replay.bag `{}`", r.bag.display()))?;
-        for (stream, kind) in replay.routes.values() {
-            kinds.insert(stream.clone(), *kind);
-        }
-        endless |= r.looped;
+    if let Some(replay) = replay {
+        endless |= replay.cfg.looped;
         let clock = if cfg.ros1.clock { ros1.clone() } else { None };
         sources.push(Box::new(ReplayAdapter { replay, clock }));
-    }
-    for e in &cfg.egress {
-        if let Some(k) = e.kind {
-            kinds.entry(e.stream.clone()).or_insert(k);
-        }
     }
     if !cfg.ingress.is_empty() {
         let dds: Option<Arc<dyn DdsBackend>> =
@@ -160,6 +209,22 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
 
 static SIGNALLED: AtomicBool = AtomicBool::new(false);
 
+/// What [`on_stopping`] registered.
+static STOPPING_HOOK: std::sync::OnceLock<Box<dyn Fn() + Send + Sync>> = std::sync::OnceLock::new();
+
+/// Registers `f` to run once the bridge decides to stop, before its adapters are told to (the
+/// binary quiets the DDS libraries' log there: tearing a RustDDS participant down logs a dozen
+/// harmless ERROR lines). Only the first registration counts.
+pub fn on_stopping(f: Box<dyn Fn() + Send + Sync>) {
+    let _ = STOPPING_HOOK.set(f);
+}
+
+fn stopping() {
+    if let Some(f) = STOPPING_HOOK.get() {
+        f();
+    }
+}
+
 extern "C" fn on_signal(_: libc::c_int) {
     SIGNALLED.store(true, Ordering::SeqCst);
 }
@@ -173,9 +238,20 @@ pub fn install_signal_handlers() {
     }
 }
 
-/// Runs a plan on `bus` until stopped; returns every adapter's report.
-pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<AdapterReport>> {
+/// What a run did and why it ended.
+#[derive(Debug)]
+pub struct Outcome {
+    /// Every adapter's report.
+    pub reports: Vec<AdapterReport>,
+    /// Why the bridge stopped.
+    pub stopped_by: String,
+}
+
+/// Runs a plan on `bus` until stopped; returns every adapter's report and why it stopped.
+pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
     let stop = Arc::new(AtomicBool::new(false));
+    let why: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
+    let has_sources = !plan.sources.is_empty();
     let mut handles = Vec::new();
     let spawn =
         |a: Box<dyn Adapter>,
@@ -184,7 +260,7 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
          -> Result<()> {
             let name = a.name();
             let sink = a.is_sink();
-            let ctl = Control::new(stop.clone(), Some(ready));
+            let ctl = Control::new(stop.clone(), Some(ready)).with_reason(why.clone());
             let bus = bus.clone();
             let h = std::thread::Builder::new()
                 .name(name.chars().take(15).collect())
@@ -193,7 +269,7 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
                     let r = a.run(bus.as_ref(), ctl);
                     if let Err(e) = &r {
                         tracing::error!("{e:#}");
-                        stopper.stop_all();
+                        stopper.stop_because(format!("an adapter failed: {e:#}"));
                     }
                     r
                 })?;
@@ -206,6 +282,14 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
         let deadline = Instant::now() + Duration::from_secs(120);
         let mut got = 0;
         while got < n && Instant::now() < deadline && !stop.load(Ordering::SeqCst) {
+            // A signal while the adapters start (e.g. a long pre-render) stops them too.
+            if SIGNALLED.load(Ordering::SeqCst) {
+                if let Ok(mut g) = why.lock() {
+                    g.get_or_insert("SIGINT/SIGTERM".into());
+                }
+                stop.store(true, Ordering::SeqCst);
+                break;
+            }
             match rx.recv_timeout(Duration::from_millis(50)) {
                 Ok(()) => got += 1,
                 Err(crossbeam::channel::RecvTimeoutError::Timeout) => {}
@@ -232,9 +316,15 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
     wait_ready(rx, n_sources);
     tracing::info!("bridge running on the {} bus", bus.name());
     let mut sources_done_at: Option<Instant> = None;
+    let set_why = |w: String| {
+        if let Ok(mut g) = why.lock() {
+            g.get_or_insert(w);
+        }
+    };
     loop {
         if SIGNALLED.load(Ordering::SeqCst) {
-            tracing::info!("signal received: stopping");
+            set_why("SIGINT/SIGTERM".into());
+            stopping();
             stop.store(true, Ordering::SeqCst);
         }
         if stop.load(Ordering::SeqCst) {
@@ -242,15 +332,34 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
         }
         let sources_left = handles.iter().any(|(_, sink, h)| !sink && !h.is_finished());
         let sinks_left = handles.iter().any(|(_, sink, h)| *sink && !h.is_finished());
-        if !plan.endless && !sources_left {
+        if has_sources && !plan.endless && !sources_left {
             let t = *sources_done_at.get_or_insert_with(Instant::now);
             if !sinks_left || t.elapsed() >= linger {
+                set_why(format!(
+                    "every source finished (the sinks had {:.1} s for the last frames)",
+                    linger.as_secs_f64()
+                ));
+                stopping();
                 stop.store(true, Ordering::SeqCst);
                 break;
             }
         }
+        if !sinks_left && !sources_left {
+            set_why("every adapter finished".into());
+            stopping();
+            stop.store(true, Ordering::SeqCst);
+            break;
+        }
         std::thread::sleep(Duration::from_millis(20));
     }
+    // Also when an adapter stopped the run (a recorder's max_frames, a failure).
+    stopping();
+    let stopped_by = why
+        .lock()
+        .ok()
+        .and_then(|g| g.clone())
+        .unwrap_or_else(|| "stopped".into());
+    tracing::info!("stopping: {stopped_by}");
     let mut reports = Vec::new();
     let mut first_err = None;
     for (name, _, h) in handles {
@@ -266,7 +375,10 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Vec<Adapte
     }
     match first_err {
         Some(e) => Err(e),
-        None => Ok(reports),
+        None => Ok(Outcome {
+            reports,
+            stopped_by,
+        }),
     }
 }
 
@@ -296,6 +408,18 @@ pub fn print_reports(reports: &[AdapterReport]) {
         );
         for d in &r.damage {
             println!("    damage: {d}");
+        }
+        if r.undelivered > 0 {
+            println!(
+                "    note: {} frame(s) published while no reader (perturbd) was connected: lost",
+                r.undelivered
+            );
+        }
+        if r.dropped > 0 {
+            println!(
+                "    dropped from full queues (ROS 1 subscribers slower than the stream, or the ingress's own queue): {}",
+                r.dropped
+            );
         }
         if r.lost > 0 {
             println!(

@@ -132,8 +132,18 @@ pub struct AdapterReport {
     pub skipped: u64,
     /// Frames lost (e.g. a DDS write that failed).
     pub failed: u64,
-    /// Frames lost before the adapter: gaps in a ROS 1 publisher's header `seq` (ingress).
+    /// Sources: frames published while no reader was connected (no `perturbd` on the stream, or
+    /// it was restarting); the daemon counts them as `dropped_upstream` once it is back.
+    #[serde(default)]
+    pub undelivered: u64,
+    /// Frames lost before the adapter: gaps in a ROS 1 publisher's header `seq` (ingress), not
+    /// counting the frames the bridge itself dropped (`dropped`).
     pub lost: u64,
+    /// Frames dropped because a queue of the bridge was full: ROS 1 subscribers slower than the
+    /// stream (egress, summed over subscribers: the oldest queued message is dropped, as roscpp
+    /// does) or the ROS 1 ingress's own queue when the bus side fell behind.
+    #[serde(default)]
+    pub dropped: u64,
     /// Damage found (bags).
     pub damage: Vec<String>,
     /// Notes.

@@ -103,14 +103,28 @@ impl Adapter for Synthetic {
             }
         };
         let t = Instant::now();
-        let cache = match &self.sensor {
-            Sensor::Camera(c) => Frames::Images(
-                (0..prerender as u64)
-                    .map(|n| street_image(c.width, c.height, n))
-                    .collect(),
-            ),
-            Sensor::Lidar(_) => Frames::Clouds((0..prerender as u64).map(vlp32c_scan).collect()),
+        // Frame by frame, so a stop (SIGINT) during a long pre-render is heeded at once; the
+        // size and the count were bounded by the configuration check.
+        let mut cache = match &self.sensor {
+            Sensor::Camera(_) => Frames::Images(Vec::with_capacity(prerender as usize)),
+            Sensor::Lidar(_) => Frames::Clouds(Vec::with_capacity(prerender as usize)),
         };
+        for n in 0..prerender as u64 {
+            if ctl.stopped() {
+                tracing::info!("{name}: stopped while pre-rendering (frame {n} of {prerender})");
+                return Ok(AdapterReport {
+                    name,
+                    ..Default::default()
+                });
+            }
+            match (&mut cache, &self.sensor) {
+                (Frames::Images(v), Sensor::Camera(c)) => {
+                    v.push(street_image(c.width, c.height, n))
+                }
+                (Frames::Clouds(v), _) => v.push(vlp32c_scan(n)),
+                _ => unreachable!("the cache matches the sensor"),
+            }
+        }
         if prerender > 0 {
             tracing::info!(
                 "{name}: rendered {prerender} frames in {:.1} s",
@@ -181,6 +195,7 @@ impl Adapter for Synthetic {
             }
             seq += 1;
         }
+        rep.undelivered = publisher.undelivered();
         Ok(rep)
     }
 }

@@ -196,6 +196,93 @@ fn replay_engine_selects_topics_skips_the_offset_and_loops() {
     assert!(rep.damage.is_empty());
 }
 
+/// A looping replay of a bag whose messages share one instant passes ten times a second; it
+/// used to log every pass (9 lines a second). The first pass is logged, then once a minute.
+#[test]
+fn a_looping_replay_of_a_one_instant_bag_does_not_flood_the_log() {
+    let dir = scratch("one-instant");
+    let bag = dir.join("b");
+    let mut w = BagWriter::create(
+        &bag,
+        &WriterOptions {
+            compression: perturb_bag::Compression::None,
+            chunk_size: 4096,
+        },
+    )
+    .unwrap();
+    let ch = w.add_topic("/cam", "sensor_msgs/msg/Image").unwrap();
+    let img = street_image(16, 8, 0);
+    let m = ImageMsg::from_view(
+        Header {
+            stamp_sec: 1,
+            stamp_nanosec: 0,
+            frame_id: "cam",
+        },
+        &img.view(),
+    );
+    w.write(ch, 1_000, 1_000, &m.encode()).unwrap();
+    w.finish().unwrap();
+    let mut child = Command::new(bridge_exe())
+        .args(["replay", "--bus", "local", "--loop"])
+        .arg(&bag)
+        .env("RUST_LOG", "info")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    interrupt(&mut child, std::time::Duration::from_secs(10)).expect("stops on SIGINT");
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let loops = stderr.matches("looping").count();
+    assert!(
+        stdout.contains("stopped: SIGINT/SIGTERM"),
+        "{stdout}{stderr}"
+    );
+    assert_eq!(loops, 1, "one line for the first pass: {stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A clean SIGINT of a bridge with RustDDS participants (pinned to loopback) logs no ERROR
+/// line: tearing RustDDS down used to log 14-26 of them (leaving multicast groups, removing
+/// writers from closed channels), which hid real errors.
+#[test]
+fn a_clean_sigint_with_rustdds_logs_no_error() {
+    let dir = scratch("rustdds-sigint");
+    let cfg = dir.join("b.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[bridge]\nbus = \"local\"\n[dds]\nbackend = \"rustdds\"\ndomain_id = {}\ninterfaces = [\"lo\"]\n\
+             [[ingress]]\ntopic = \"/in/img\"\ntype = \"image\"\nstream = \"cam\"\n\
+             [[egress]]\nstream = \"cam\"\ntopic = \"/out/img\"\n",
+            domain(2)
+        ),
+    )
+    .unwrap();
+    let mut child = Command::new(bridge_exe())
+        .arg("--config")
+        .arg(&cfg)
+        .env_remove("RUST_LOG")
+        .stdout(std::process::Stdio::piped())
+        // A file: RustDDS warns a lot, which would fill a pipe nobody reads yet.
+        .stderr(std::fs::File::create(dir.join("stderr")).unwrap())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    interrupt(&mut child, std::time::Duration::from_secs(15)).expect("stops on SIGINT");
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = std::fs::read_to_string(dir.join("stderr")).unwrap();
+    assert!(
+        stdout.contains("stopped: SIGINT/SIGTERM"),
+        "{stdout}{stderr}"
+    );
+    assert!(!stderr.contains("ERROR"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn truncated_bag_replays_what_can_be_read_and_reports_the_damage() {
     let dir = scratch("damaged");
@@ -317,4 +404,141 @@ fn example_configs_are_valid() {
         }
     }
     assert!(n >= 3);
+}
+
+#[test]
+fn a_recorder_without_a_source_of_its_own_runs_until_stopped_and_says_why() {
+    let dir = scratch("record-only");
+    let mut child = Command::new(bridge_exe())
+        .args([
+            "record",
+            "--bus",
+            "local",
+            "--stream",
+            "camera_front=image",
+            "--out",
+        ])
+        .arg(dir.join("rec"))
+        .args(["--max-frames", "100"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Nothing feeds the stream in this process: the sources are other processes that may start
+    // later. The recorder must wait for them (it used to stop after the 2 s linger).
+    std::thread::sleep(std::time::Duration::from_secs(4));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the recorder stopped on its own without a frame"
+    );
+    let st = interrupt(&mut child, std::time::Duration::from_secs(10)).expect("stops on SIGINT");
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        st.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("stopped: SIGINT/SIGTERM"), "{stdout}");
+
+    // With --seconds it stops by itself, and says so.
+    let out = Command::new(bridge_exe())
+        .args([
+            "record",
+            "--bus",
+            "local",
+            "--stream",
+            "camera_front=image",
+            "--out",
+        ])
+        .arg(dir.join("rec2"))
+        .args(["--seconds", "1"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("recorded for the 1 s asked for"),
+        "{stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A large synthetic camera pre-renders for seconds; a SIGINT meanwhile stops the bridge at
+/// once (it used to be ignored until every frame was rendered).
+#[test]
+fn a_synthetic_source_heeds_sigint_while_it_pre_renders() {
+    let mut child = Command::new(bridge_exe())
+        .args([
+            "synthetic",
+            "--bus",
+            "local",
+            "--lidar",
+            "",
+            "--size",
+            "4096x4096",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // 21 frames of 4096x4096 (what fits in the pre-render bound) take well over 10 s here.
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let st = interrupt(&mut child, std::time::Duration::from_secs(5))
+        .expect("the bridge stops within 5 s of SIGINT while pre-rendering");
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        st.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("stopped: SIGINT/SIGTERM"), "{stdout}");
+}
+
+#[test]
+fn check_resolves_what_the_run_would_resolve() {
+    let dir = scratch("check-resolves");
+    std::fs::create_dir_all(&dir).unwrap();
+    let check = |name: &str, text: &str| {
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        let o = Command::new(bridge_exe())
+            .arg("--config")
+            .arg(&p)
+            .arg("--check")
+            .output()
+            .unwrap();
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stderr).to_string(),
+        )
+    };
+    let (ok, err) = check(
+        "missing.toml",
+        "[bridge]\nbus = \"local\"\n[replay]\nbag = \"no_such.mcap\"\n",
+    );
+    assert!(
+        !ok && err.contains("replay.bag") && err.contains("no_such.mcap"),
+        "{err}"
+    );
+    let (ok, err) = check(
+        "kind.toml",
+        "[bridge]\nbus = \"local\"\n[dds]\ninterfaces = [\"lo\"]\n\
+         [[synthetic.camera]]\nstream = \"cam\"\nwidth = 64\nheight = 48\n\
+         [[egress]]\nstream = \"cam\"\ntopic = \"/cam\"\nkind = \"cloud\"\n",
+    );
+    assert!(
+        !ok && err.contains("egress[0].kind") && err.contains("cam"),
+        "{err}"
+    );
+    let (ok, err) = check(
+        "record.toml",
+        "[bridge]\nbus = \"local\"\n[record]\nout = \"rec\"\nstreams = [\"nobody\"]\n",
+    );
+    assert!(
+        !ok && err.contains("record.streams[0]") && err.contains("nobody"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

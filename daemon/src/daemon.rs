@@ -4,7 +4,9 @@
 
 use crate::config::Config;
 use crate::perturbation::{self, Active};
+use crate::state::{self, CountersFile, RuntimeState, StatePaths};
 use crate::worker::{self, StreamRuntime};
+use perturb_core::registry::Modality;
 use perturb_wire::control::{
     ControlClient, ControlRequest, ControlResponse, ControlServer, StreamReport,
 };
@@ -33,8 +35,14 @@ pub struct Report {
     pub streams: Vec<StreamReport>,
 }
 
-/// Runs the daemon until a termination signal. `report_path` overrides `[daemon] report`.
-pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> anyhow::Result<()> {
+/// Runs the daemon until a termination signal. `report_path` overrides `[daemon] report`; the
+/// state files go next to the report (see [`crate::state`]); `fresh` ignores what they hold.
+pub fn run(
+    config_path: &Path,
+    cfg: Config,
+    report_path: Option<PathBuf>,
+    fresh: bool,
+) -> anyhow::Result<()> {
     let started = Instant::now();
     let started_unix_s = SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -72,6 +80,43 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
     }
     let server = ControlServer::create(&transport, control_service)?;
 
+    let report_path = report_path
+        .or(cfg.daemon.report.clone())
+        .unwrap_or_else(|| PathBuf::from("perturbd-report.json"));
+    let paths = StatePaths::for_report(&report_path);
+    let saved = if fresh {
+        info!(state = %paths.runtime.display(), "--fresh: the runtime state and counters of the last run are ignored");
+        None
+    } else {
+        match RuntimeState::load(&paths.runtime) {
+            Ok(s) => s,
+            Err(e) => {
+                warn!("{e}; starting from the configuration");
+                None
+            }
+        }
+    };
+    let counters = match CountersFile::open(&paths.counters, &cfg.streams, fresh) {
+        Ok((f, carried)) => {
+            for (stream, lost) in &carried.after_crash {
+                warn!(
+                    stream = stream.as_str(),
+                    lost_in_flight = lost,
+                    counters = %paths.counters.display(),
+                    "the last perturbd did not stop cleanly: its counters carry on, and the frames it had taken in but not published are counted as dropped_restart"
+                );
+            }
+            Some(f)
+        }
+        Err(e) => {
+            warn!(
+                counters = %paths.counters.display(),
+                "cannot keep the counters in a file ({e}): they live in memory only and a restart will not know where the streams were"
+            );
+            None
+        }
+    };
+
     // Open every stream's services before starting any worker, so a bad stream stops the
     // daemon before it touches the others. The output goes first: once the input has its
     // subscriber (what a publisher waits for), the output is ready too.
@@ -79,7 +124,12 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
     let mut streams = Vec::new();
     let mut ports = Vec::new();
     for s in &cfg.streams {
-        let initial: Option<Active> = match &s.perturbation {
+        let restored = saved.as_ref().and_then(|st| st.restore_for(s));
+        let wanted = match &restored {
+            Some(r) => r.clone(),
+            None => state::configured(s),
+        };
+        let initial: Option<Active> = match &wanted {
             Some(p) => Some(
                 perturbation::build(s, &p.id, p.severity, p.seed, None)
                     .map(|(_, a)| a)
@@ -87,14 +137,43 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
             ),
             None => None,
         };
+        if let Some(r) = &restored
+            && *r != state::configured(s)
+        {
+            let what = |p: &Option<state::Saved>| match p {
+                Some(p) => format!("{} severity {} seed {}", p.id, p.severity, p.seed),
+                None => "off".into(),
+            };
+            info!(
+                stream = s.name.as_str(),
+                runtime = what(r).as_str(),
+                configured = what(&state::configured(s)).as_str(),
+                state = %paths.runtime.display(),
+                "restored the perturbation set at runtime before the restart (--fresh starts from the configuration)"
+            );
+        }
+        if restored.is_none()
+            && let Some(st) = saved.as_ref().and_then(|st| st.streams.get(&s.name))
+            && st.active != state::configured(s)
+        {
+            info!(
+                stream = s.name.as_str(),
+                state = %paths.runtime.display(),
+                "the configuration's perturbation changed since the runtime state was saved: the configuration wins"
+            );
+        }
         let output = transport
             .publisher(&s.output_service(), &s.qos, Hop::Keep, 1)
             .map_err(|e| anyhow::anyhow!("stream `{}` output: {e}", s.name))?;
         let input = transport
             .subscriber(&s.input_service(), &s.qos, None)
             .map_err(|e| anyhow::anyhow!("stream `{}` input: {e}", s.name))?;
+        let cell = counters
+            .as_ref()
+            .and_then(|f| f.cell(&s.name))
+            .unwrap_or_default();
         let rt = Arc::new(
-            StreamRuntime::new(s.clone(), initial.as_ref().map(|a| a.spec()))
+            StreamRuntime::new(s.clone(), initial.as_ref().map(|a| a.spec()), cell)
                 .map_err(|e| anyhow::anyhow!("stream `{}` worker threads: {e}", s.name))?,
         );
         info!(
@@ -103,11 +182,11 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
             input = %s.input_service(),
             output = %s.output_service(),
             sensor = match s.modality {
-                perturb_core::registry::Modality::Lidar => s
+                Modality::Lidar => s
                     .sensor_model()
                     .map(|m| m.describe())
                     .unwrap_or_else(|e| e),
-                perturb_core::registry::Modality::Camera => "-".to_string(),
+                Modality::Camera => "-".to_string(),
             },
             perturbation = initial
                 .as_ref()
@@ -124,9 +203,13 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
     for (rt, input, output, initial) in ports {
         threads.extend(worker::spawn(rt, input, output, initial, shutdown.clone())?);
     }
+    let persist = Persist {
+        path: paths.runtime.clone(),
+    };
+    persist.save(&streams);
     info!(control = control_service, "perturbd ready");
 
-    let stopped_by = serve(&server, &streams, cfg.daemon.stats_interval_s);
+    let stopped_by = serve(&server, &streams, cfg.daemon.stats_interval_s, &persist);
     info!(reason = stopped_by.as_str(), "perturbd stopping");
     shutdown.store(true, Ordering::Relaxed);
     for t in threads {
@@ -142,13 +225,14 @@ pub fn run(config_path: &Path, cfg: Config, report_path: Option<PathBuf>) -> any
         stopped_by,
         streams: streams.iter().map(|s| s.report(true)).collect(),
     };
-    let path = report_path
-        .or(cfg.daemon.report.clone())
-        .unwrap_or_else(|| PathBuf::from("perturbd-report.json"));
+    let path = report_path;
     let json = serde_json::to_string_pretty(&report_value(&report))?;
     std::fs::write(&path, json + "\n")
         .map_err(|e| anyhow::anyhow!("cannot write the report {}: {e}", path.display()))?;
     info!(report = %path.display(), "report written");
+    if let Some(c) = &counters {
+        c.mark_clean();
+    }
     Ok(())
 }
 
@@ -156,8 +240,48 @@ fn report_value(r: &Report) -> serde_json::Value {
     serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
 }
 
+/// Writes the runtime state file after every change.
+pub struct Persist {
+    /// The runtime state file.
+    pub path: PathBuf,
+}
+
+impl Persist {
+    /// Saves what every stream runs now (a failure is logged: the daemon goes on).
+    pub fn save(&self, streams: &[Arc<StreamRuntime>]) {
+        let mut st = RuntimeState {
+            version: 1,
+            ..Default::default()
+        };
+        for rt in streams {
+            st.streams.insert(
+                rt.config.name.clone(),
+                state::StreamState {
+                    active: rt.current().map(|s| state::Saved {
+                        id: s.entry.id.to_string(),
+                        severity: s.severity,
+                        seed: s.seed,
+                    }),
+                    configured: state::configured(&rt.config),
+                },
+            );
+        }
+        if let Err(e) = st.save(&self.path) {
+            warn!(
+                state = %self.path.display(),
+                "cannot save the runtime state ({e}): a restart will start from the configuration"
+            );
+        }
+    }
+}
+
 /// The control and statistics loop; returns why it stopped.
-fn serve(server: &ControlServer, streams: &[Arc<StreamRuntime>], stats_interval_s: f64) -> String {
+fn serve(
+    server: &ControlServer,
+    streams: &[Arc<StreamRuntime>],
+    stats_interval_s: f64,
+    persist: &Persist,
+) -> String {
     let waitset = match WaitSetBuilder::new().create::<Ipc>() {
         Ok(w) => w,
         Err(e) => return format!("cannot create the main WaitSet: {e:?}"),
@@ -176,7 +300,15 @@ fn serve(server: &ControlServer, streams: &[Arc<StreamRuntime>], stats_interval_
     loop {
         let r = waitset.wait_and_process_once(|id| {
             if id.has_event_from(&control)
-                && let Err(e) = server.serve(|req| handle(streams, req))
+                && let Err(e) = server.serve(|req| {
+                    let change =
+                        matches!(req, ControlRequest::Set { .. } | ControlRequest::Off { .. });
+                    let resp = handle(streams, req);
+                    if change && resp.ok {
+                        persist.save(streams);
+                    }
+                    resp
+                })
             {
                 warn!("control channel: {e}");
             }

@@ -16,6 +16,7 @@
 pub mod config;
 pub mod daemon;
 pub mod perturbation;
+pub mod state;
 pub mod stats;
 pub mod worker;
 

@@ -23,6 +23,10 @@ struct Args {
     /// Only check the configuration and exit.
     #[arg(long)]
     check: bool,
+    /// Start from the configuration alone: ignore the perturbations set at runtime before the
+    /// last restart and the counters of the last run (both kept next to the report).
+    #[arg(long)]
+    fresh: bool,
 }
 
 fn main() {
@@ -49,7 +53,7 @@ fn main() {
         );
         return;
     }
-    if let Err(e) = perturbd::daemon::run(&args.config, cfg, args.report) {
+    if let Err(e) = perturbd::daemon::run(&args.config, cfg, args.report, args.fresh) {
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }

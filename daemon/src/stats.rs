@@ -7,7 +7,6 @@
 
 use perturb_wire::control::{LatencySummary, StreamLatency};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 const SUB_BITS: u32 = 6;
 const SUB: u64 = 1 << SUB_BITS;
@@ -130,46 +129,14 @@ impl Latencies {
     }
 }
 
-/// Counters of one stream.
-#[derive(Debug, Default)]
-pub struct Counters {
-    /// Frames received.
-    pub frames_in: AtomicU64,
-    /// Frames published.
-    pub frames_out: AtomicU64,
-    /// Dropped from the worker's queue.
-    pub dropped_queue: AtomicU64,
-    /// Missing sequence numbers on the input.
-    pub dropped_upstream: AtomicU64,
-    /// Could not be published.
-    pub dropped_output: AtomicU64,
-    /// Refused as invalid.
-    pub invalid: AtomicU64,
-    /// Perturbation failed (forwarded unperturbed).
-    pub perturb_failed: AtomicU64,
-    /// Over the latency budget.
-    pub over_budget: AtomicU64,
-    /// Last sequence number received + 1 (0: none yet).
-    pub last_seq_plus_one: AtomicU64,
-}
-
-impl Counters {
-    /// Adds `n` to a counter.
-    pub fn add(c: &AtomicU64, n: u64) {
-        c.fetch_add(n, Ordering::Relaxed);
-    }
-
-    /// Reads a counter.
-    pub fn get(c: &AtomicU64) -> u64 {
-        c.load(Ordering::Relaxed)
-    }
-}
+use crate::state::CounterCell;
+pub use crate::state::Counters;
 
 /// Counters and latencies of one stream.
 #[derive(Debug, Default)]
 pub struct StreamStats {
-    /// The counters.
-    pub counters: Counters,
+    /// The counters (in the daemon: in the memory-mapped counters file, see [`crate::state`]).
+    pub counters: CounterCell,
     /// The latency histograms.
     pub latencies: Mutex<Latencies>,
 }

@@ -11,6 +11,7 @@
 
 use crate::config::StreamConfig;
 use crate::perturbation::Active;
+use crate::state::CounterCell;
 use crate::stats::{Counters, StreamStats};
 use crossbeam::channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
 use perturb_core::image::ImageGeometry;
@@ -57,13 +58,15 @@ pub struct StreamRuntime {
 }
 
 impl StreamRuntime {
-    /// A stream with its initial perturbation (already built), and its own pool of worker
-    /// threads when its configuration asks for one.
+    /// A stream with its initial perturbation (already built), its counters (see
+    /// [`crate::state::CountersFile`]; `CounterCell::default()` keeps them in memory) and its own
+    /// pool of worker threads when its configuration asks for one.
     pub fn new(
         config: StreamConfig,
         initial: Option<Spec>,
+        counters: CounterCell,
     ) -> Result<Self, rayon::ThreadPoolBuildError> {
-        let seed = config.initial_seed();
+        let seed = initial.map_or(config.initial_seed(), |s| s.seed);
         let pool = match config.threads {
             Some(n) => {
                 let name = config.name.clone();
@@ -78,7 +81,10 @@ impl StreamRuntime {
         };
         Ok(StreamRuntime {
             config,
-            stats: StreamStats::default(),
+            stats: StreamStats {
+                counters,
+                latencies: Default::default(),
+            },
             control: Mutex::new(ControlState {
                 current: initial,
                 seed,
@@ -131,6 +137,11 @@ impl StreamRuntime {
         self.has_pending.store(true, Ordering::Release);
     }
 
+    /// What the stream runs from the next frame on (`None`: off).
+    pub fn current(&self) -> Option<Spec> {
+        self.lock_control().current
+    }
+
     /// Forwards frames unchanged from the next frame on.
     pub fn off(&self) {
         let mut c = self.lock_control();
@@ -151,10 +162,11 @@ impl StreamRuntime {
         let c = &self.stats.counters;
         let g = Counters::get;
         let current = self.lock_control().current;
-        let (dq, du, dout) = (
+        let (dq, du, dout, dr) = (
             g(&c.dropped_queue),
             g(&c.dropped_upstream),
             g(&c.dropped_output),
+            g(&c.dropped_restart),
         );
         let last = g(&c.last_seq_plus_one);
         StreamReport {
@@ -168,10 +180,11 @@ impl StreamRuntime {
             seed: current.map_or(self.current_seed(), |s| s.seed),
             frames_in: g(&c.frames_in),
             frames_out: g(&c.frames_out),
-            dropped: dq + du + dout,
+            dropped: dq + du + dout + dr,
             dropped_queue: dq,
             dropped_upstream: du,
             dropped_output: dout,
+            dropped_restart: dr,
             invalid: g(&c.invalid),
             perturb_failed: g(&c.perturb_failed),
             over_budget: g(&c.over_budget),
@@ -199,13 +212,21 @@ fn should_log(n: u64) -> bool {
     n <= 10 || n.is_multiple_of(100)
 }
 
-/// Sequence-number bookkeeping per publisher: a jump forward is a count of lost frames.
-#[derive(Default)]
+/// Sequence-number bookkeeping per publisher: a jump forward is a count of lost frames. It starts
+/// from where the counters file says the stream was, so a restarted daemon counts the frames its
+/// publisher sent while no daemon was there.
 struct GapTracker {
     last: Option<(Origin, u64)>,
 }
 
 impl GapTracker {
+    /// Starts from the publisher and sequence number recorded in `c`.
+    fn resume(c: &Counters) -> Self {
+        GapTracker {
+            last: c.last_origin().map(|(o, seq)| (Origin::from_raw(o), seq)),
+        }
+    }
+
     /// Missing sequence numbers before `seq`.
     fn observe(&mut self, stream: &str, origin: Origin, seq: u64) -> u64 {
         let gap = match self.last {
@@ -261,10 +282,21 @@ fn receive_loop(
 ) {
     let name = rt.config.name.as_str();
     let c = &rt.stats.counters;
-    let mut gaps = GapTracker::default();
+    let mut gaps = GapTracker::resume(c);
     let mut layouts = LayoutCache::default();
     while !shutdown.load(Ordering::Relaxed) {
         let mut broken = false;
+        // A reopen that failed left no ports: try again before waiting on them.
+        if !sub.has_ports() {
+            if let Err(e) = sub.reopen() {
+                error!(
+                    stream = name,
+                    "cannot reopen the input: {e}; retrying in 1 s"
+                );
+                std::thread::sleep(Duration::from_secs(1));
+            }
+            continue;
+        }
         {
             let waitset = match WaitSetBuilder::new()
                 .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -302,7 +334,8 @@ fn receive_loop(
                             // Magic, version and seq keep their place in every wire version, so
                             // even a frame this build cannot read is accounted for.
                             if h.magic == MAGIC {
-                                let gap = gaps.observe(name, frame.origin(), h.seq);
+                                let origin = frame.origin();
+                                let gap = gaps.observe(name, origin, h.seq);
                                 if gap > 0 {
                                     let n = c.dropped_upstream.fetch_add(gap, Ordering::Relaxed);
                                     if should_log(n + 1) {
@@ -314,6 +347,7 @@ fn receive_loop(
                                         );
                                     }
                                 }
+                                c.set_origin(origin.raw());
                                 c.last_seq_plus_one.store(h.seq + 1, Ordering::Relaxed);
                             }
                             // An invalid frame is counted and released here, so it never takes
@@ -665,7 +699,7 @@ mod tests {
 
     #[test]
     fn a_stream_with_threads_runs_its_frame_work_on_a_pool_of_that_size() {
-        let rt = StreamRuntime::new(stream("threads = 3\n"), None).unwrap();
+        let rt = StreamRuntime::new(stream("threads = 3\n"), None, CounterCell::default()).unwrap();
         assert_eq!(rt.worker_threads(), 3);
         let (n, name) = rt.on_workers(|| {
             let inner = rayon::join(|| std::thread::current().name().map(str::to_owned), || ());
@@ -674,7 +708,7 @@ mod tests {
         assert_eq!(n, 3);
         assert!(name.is_some_and(|n| n.ends_with("-cam")));
         // Without `threads` the work stays on the caller's (global) pool.
-        let rt = StreamRuntime::new(stream(""), None).unwrap();
+        let rt = StreamRuntime::new(stream(""), None, CounterCell::default()).unwrap();
         assert_eq!(
             rt.on_workers(rayon::current_num_threads),
             rayon::current_num_threads()

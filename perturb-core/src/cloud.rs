@@ -366,6 +366,14 @@ fn check_cloud(
     if step == 0 && width > 0 {
         return Err(Error::cloud("point_step is 0"));
     }
+    // A cloud without rows that declares points per row contradicts itself: forwarded as an
+    // empty cloud, its points would be lost without a word. (An empty cloud has width 0, with
+    // height 0 or 1.)
+    if height == 0 && width > 0 {
+        return Err(Error::cloud(format!(
+            "height is 0 but width is {width} ({len} data bytes): a cloud without rows cannot have points per row"
+        )));
+    }
     if row_step < row {
         return Err(Error::cloud(format!(
             "row_step {row_step} is smaller than width {width} x point_step {step} = {row}"
@@ -615,6 +623,20 @@ mod tests {
         let layout = Arc::new(PointLayout::xyzi_f32());
         let err = CloudView::new(layout.clone(), &[0u8; 31], 2, 1, 32, true).unwrap_err();
         assert!(err.to_string().contains("31 bytes"), "{err}");
+        assert!(CloudView::new(layout, &[], 0, 1, 0, true).is_ok());
+    }
+
+    /// A PointCloud2 with height 0 and a width (and the data of its points) was forwarded as an
+    /// empty cloud and counted as forwarded: it is invalid. Empty clouds stay valid.
+    #[test]
+    fn height_zero_with_points_per_row_is_refused() {
+        let layout = Arc::new(PointLayout::xyzi_f32());
+        let err = CloudView::new(layout.clone(), &[0u8; 64], 4, 0, 64, true).unwrap_err();
+        assert!(
+            err.to_string().contains("height is 0 but width is 4"),
+            "{err}"
+        );
+        assert!(CloudView::new(layout.clone(), &[], 0, 0, 0, true).is_ok());
         assert!(CloudView::new(layout, &[], 0, 1, 0, true).is_ok());
     }
 

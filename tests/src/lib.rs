@@ -147,14 +147,25 @@ impl Namespace {
 
     /// Starts `perturbd --config CONFIG` and waits until it answers `perturb ctl status`.
     pub fn start_daemon(&self, config: &Path) -> Daemon {
+        self.start_daemon_with(config, &[])
+    }
+
+    /// [`Namespace::start_daemon`] with extra arguments (e.g. `--fresh`).
+    pub fn start_daemon_with(&self, config: &Path, extra: &[&str]) -> Daemon {
         let report = self.dir.join("perturbd-report.json");
-        let log = std::fs::File::create(self.dir.join("perturbd.log")).expect("daemon log");
+        // Every start appends to the same log, so a test sees what each daemon said.
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(self.dir.join("perturbd.log"))
+            .expect("daemon log");
         let child = self
             .command(exe("perturbd"))
             .arg("--config")
             .arg(config)
             .arg("--report")
             .arg(&report)
+            .args(extra)
             .stdout(Stdio::null())
             .stderr(log)
             .spawn()

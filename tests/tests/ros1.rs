@@ -895,6 +895,92 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
     );
 }
 
+/// A rospy subscriber stopped (SIGSTOP) while 1 MB images are published: its queue of two
+/// drops the oldest messages, and what it got plus what the publisher counts as dropped is
+/// every message published, also after the subscriber has left (its count was lost with its
+/// link before).
+#[test]
+fn ros1_slow_subscriber_drops_are_counted_and_add_up() {
+    if !have_ros1() {
+        return;
+    }
+    let ns = Namespace::new("ros1-slow");
+    let master = Ros1Master::start(&ns.dir);
+    let node = Node::start(&settings(&master, "perturb_slow_test")).unwrap();
+    let mut publisher = node.advertise("/slow/image", ros1::IMAGE).unwrap();
+    let mut sub = ros1_peer(
+        &master,
+        &[
+            "sub",
+            "--topic",
+            "/slow/image",
+            "--type",
+            "image",
+            "--count",
+            "1000",
+            "--timeout",
+            "12",
+            "--no-hash",
+            "--name",
+            "slow",
+        ],
+    );
+    let r = ros1_ready(&mut sub);
+    assert!(wait_for(Duration::from_secs(15), || publisher
+        .subscribers()
+        == 1));
+    // SAFETY: signalling our own child process by pid.
+    unsafe { libc::kill(sub.id() as i32, libc::SIGSTOP) };
+    let pixels = vec![7u8; 1000 * 1000];
+    const SENT: u64 = 40;
+    for k in 0..SENT as u32 {
+        let m = ImageMsg {
+            header: Header {
+                stamp_sec: k as i32,
+                stamp_nanosec: 0,
+                frame_id: "cam",
+            },
+            height: 1000,
+            width: 1000,
+            encoding: "mono8",
+            is_bigendian: 0,
+            step: 1000,
+            data: &pixels,
+        };
+        let parts = m.ros1_parts(k);
+        assert_eq!(
+            publisher.publish(&[&parts.head, parts.data, &parts.tail]),
+            1
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    assert!(
+        publisher.dropped() > 0,
+        "a stopped subscriber dropped nothing"
+    );
+    // SAFETY: as above.
+    unsafe { libc::kill(sub.id() as i32, libc::SIGCONT) };
+    let got = ros1_lines(r, &mut sub).len() as u64;
+    let dropped = publisher.dropped();
+    assert!(got > 0 && dropped > 0, "got {got}, dropped {dropped}");
+    assert_eq!(
+        got + dropped,
+        SENT,
+        "delivered {got} + dropped {dropped} != published {SENT}"
+    );
+    // The subscriber has exited; the link goes at the next writes, and its count stays.
+    assert!(wait_for(Duration::from_secs(10), || {
+        publisher.publish(&[&[0u8; 4][..]]);
+        publisher.subscribers() == 0
+    }));
+    assert!(
+        publisher.dropped() >= dropped,
+        "the drops of a subscriber that left are forgotten: {} < {dropped}",
+        publisher.dropped()
+    );
+}
+
 #[test]
 fn ros1_profile_mcap_ouster_replays_through_perturbd() {
     let bag =

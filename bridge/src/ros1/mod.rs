@@ -196,7 +196,12 @@ impl TopicReader for TopicReader1 {
     }
 
     fn lost(&self) -> u64 {
-        self.lost
+        // The gaps include the messages this reader's own queue dropped: those are `dropped`.
+        self.lost.saturating_sub(self.sub.dropped())
+    }
+
+    fn dropped(&self) -> u64 {
+        self.sub.dropped()
     }
 }
 
@@ -224,6 +229,10 @@ impl TopicWriter for TopicWriter1 {
         self.publisher
             .publish(&[&parts.head, parts.data, &parts.tail]);
         Ok(())
+    }
+
+    fn dropped(&self) -> u64 {
+        self.publisher.dropped()
     }
 }
 

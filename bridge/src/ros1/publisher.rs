@@ -42,6 +42,8 @@ pub(crate) struct PubShared {
     pub(crate) registered: AtomicBool,
     links: Mutex<Vec<Arc<Link>>>,
     closed: AtomicBool,
+    /// Messages dropped for subscribers that have left.
+    dropped_gone: AtomicU64,
 }
 
 impl PubShared {
@@ -52,6 +54,7 @@ impl PubShared {
             registered: AtomicBool::new(false),
             links: Mutex::default(),
             closed: AtomicBool::new(false),
+            dropped_gone: AtomicU64::new(0),
         }
     }
 
@@ -104,10 +107,16 @@ impl PubShared {
             }
         };
         link.kill();
-        if let Ok(mut l) = self.links.lock() {
-            l.retain(|x| x.id != link.id);
-        }
-        let dropped = link.dropped.load(Ordering::Relaxed);
+        let dropped = match self.links.lock() {
+            Ok(mut l) => {
+                l.retain(|x| x.id != link.id);
+                // Under the lock, so `dropped()` never counts the link twice or not at all.
+                let n = link.dropped.load(Ordering::Relaxed);
+                self.dropped_gone.fetch_add(n, Ordering::Relaxed);
+                n
+            }
+            Err(_) => link.dropped.load(Ordering::Relaxed),
+        };
         info!(
             topic = %self.topic,
             subscriber = %link.caller,
@@ -144,7 +153,12 @@ impl PubShared {
     fn dropped(&self) -> u64 {
         self.links
             .lock()
-            .map(|l| l.iter().map(|l| l.dropped.load(Ordering::Relaxed)).sum())
+            .map(|l| {
+                self.dropped_gone.load(Ordering::Relaxed)
+                    + l.iter()
+                        .map(|l| l.dropped.load(Ordering::Relaxed))
+                        .sum::<u64>()
+            })
             .unwrap_or(0)
     }
 
@@ -206,7 +220,7 @@ impl Publisher {
         self.shared.subscribers()
     }
 
-    /// Messages dropped for slow subscribers so far (connected ones).
+    /// Messages dropped for slow subscribers so far (those connected now and those that left).
     pub fn dropped(&self) -> u64 {
         self.shared.dropped()
     }

@@ -26,6 +26,7 @@
 
 pub mod dynamic;
 pub mod events;
+pub mod guard;
 mod read;
 pub mod ros1;
 pub mod schema;

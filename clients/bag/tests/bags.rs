@@ -190,7 +190,7 @@ fn a_truncated_bag_replays_what_can_be_read_and_reports_the_damage() {
             Ok(ControlFlow::Continue(()))
         })
         .unwrap();
-    assert!(got > 0 && got < 20, "delivered {got}");
+    assert!(got > 0 && got < 20, "delivered {got}: {report:?}");
     assert_eq!(report.order, ReadOrder::FileOrder);
     let damage = report.damage.expect("damage reported");
     assert!(damage.contains("cut.mcap"), "{damage}");
@@ -200,4 +200,139 @@ fn a_truncated_bag_replays_what_can_be_read_and_reports_the_damage() {
     assert!(err.contains("magic") && err.contains("cut.mcap"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&cut);
+}
+
+/// The (offset of the opcode, opcode, body range) of every top-level record of an MCAP file.
+fn records(bytes: &[u8]) -> Vec<(usize, u8, std::ops::Range<usize>)> {
+    let mut out = Vec::new();
+    let mut pos = 8;
+    while pos + 9 <= bytes.len() - 8 {
+        let op = bytes[pos];
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        out.push((pos, op, pos + 9..pos + 9 + len));
+        pos += 9 + len;
+    }
+    out
+}
+
+#[test]
+fn hostile_lengths_are_reported_as_damage_instead_of_being_allocated() {
+    let dir = tmp("hostile");
+    write_sample(&dir, Compression::Zstd);
+    let file = dir.join(format!(
+        "{}_0.mcap",
+        dir.file_name().unwrap().to_str().unwrap()
+    ));
+    let good = std::fs::read(&file).unwrap();
+    let recs = records(&good);
+    let out = tmp("hostile-out");
+    std::fs::create_dir_all(&out).unwrap();
+    let read_all = |bytes: &[u8], name: &str| {
+        let p = out.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        let bag = Bag::open(&p)?;
+        let mut n = 0;
+        let report = bag.for_each(&Filter::default(), |_| {
+            n += 1;
+            Ok(ControlFlow::Continue(()))
+        })?;
+        Ok::<_, perturb_bag::BagError>((bag.is_indexed(), n, report))
+    };
+    let (indexed, n, report) = read_all(&good, "good.mcap").unwrap();
+    assert!(indexed && n == 20 && report.damage.is_none(), "{report:?}");
+
+    // The Header record's profile string claims 4 GiB: refused, naming the record.
+    let mut b = good.clone();
+    b[17..21].copy_from_slice(&4_294_967_054u32.to_le_bytes());
+    let e = read_all(&b, "header.mcap").unwrap_err().to_string();
+    assert!(
+        e.contains("Header record profile")
+            && e.contains("4294967054")
+            && e.contains("header.mcap"),
+        "{e}"
+    );
+
+    // A Channel record of the summary with a 4 GiB topic: the summary is not used, the data
+    // section is read in file order instead, and a note says why.
+    let summary_channel = recs
+        .iter()
+        .rev()
+        .find(|r| r.1 == 0x04)
+        .expect("a channel record in the summary");
+    let mut b = good.clone();
+    let at = summary_channel.2.start + 4;
+    b[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    let (indexed, n, report) = read_all(&b, "channel.mcap").unwrap();
+    assert!(!indexed && n == 20 && report.damage.is_none(), "{report:?}");
+    assert!(
+        report
+            .notes
+            .iter()
+            .any(|x| x.contains("Channel record topic")),
+        "{report:?}"
+    );
+
+    // The same, with a Footer record whose length is not 20 (found by fuzzing: the `mcap` crate
+    // still read the summary it points to, without the lengths checked): not used either.
+    let n = b.len();
+    b[n - 37 + 1..n - 37 + 9].copy_from_slice(&96u64.to_le_bytes());
+    let (indexed, n, report) = read_all(&b, "footer.mcap").unwrap();
+    assert!(!indexed && n == 20 && report.damage.is_none(), "{report:?}");
+    assert!(
+        report.notes.iter().any(|x| x.contains("Footer record")),
+        "{report:?}"
+    );
+
+    // Every chunk (and its index) claims to decompress to 2^60 bytes: damage, no allocation.
+    let mut b = good.clone();
+    for r in recs.iter().filter(|r| r.1 == 0x06) {
+        let at = r.2.start + 16;
+        b[at..at + 8].copy_from_slice(&(1u64 << 60).to_le_bytes());
+    }
+    for r in recs.iter().filter(|r| r.1 == 0x08) {
+        let at = r.2.end - 8;
+        b[at..at + 8].copy_from_slice(&(1u64 << 60).to_le_bytes());
+    }
+    let (indexed, _, report) = read_all(&b, "chunk.mcap").unwrap();
+    assert!(!indexed, "{report:?}");
+    let damage = report.damage.expect("damage reported");
+    assert!(damage.contains("chunk.mcap"), "{damage}");
+
+    // An uncompressed chunk whose records run past its declared size (found by fuzzing: the
+    // mcap crate's reader subtracted past zero), in a bag without summary: damage, no panic.
+    let plain = tmp("hostile-plain");
+    write_sample(&plain, Compression::None);
+    let pfile = plain.join(format!(
+        "{}_0.mcap",
+        plain.file_name().unwrap().to_str().unwrap()
+    ));
+    let pgood = std::fs::read(&pfile).unwrap();
+    let precs = records(&pgood);
+    let chunk = precs.iter().find(|r| r.1 == 0x06).expect("a chunk");
+    let data_end = precs
+        .iter()
+        .find(|r| r.1 == 0x0F)
+        .expect("a Data End record");
+    let mut b = pgood[..data_end.0].to_vec();
+    let at = chunk.2.start + 8 + 8 + 8 + 4 + 4;
+    let size = u64::from_le_bytes(b[at..at + 8].try_into().unwrap());
+    b[at..at + 8].copy_from_slice(&(size - 5).to_le_bytes());
+    let (indexed, _, report) = read_all(&b, "short_chunk.mcap").unwrap();
+    assert!(!indexed);
+    let damage = report.damage.expect("damage reported");
+    assert!(damage.contains("short_chunk.mcap"), "{damage}");
+    let _ = std::fs::remove_dir_all(&plain);
+
+    // Cut right after the magic bytes, or right after the Header record: damaged, not empty.
+    let e = read_all(&good[..8], "magic.mcap").unwrap_err().to_string();
+    assert!(e.contains("right after the magic bytes"), "{e}");
+    let header_end = recs[0].2.end;
+    let (_, n, report) = read_all(&good[..header_end], "header_only.mcap").unwrap();
+    assert_eq!(n, 0);
+    let damage = report
+        .damage
+        .expect("a bag cut after its header is damaged");
+    assert!(damage.contains("truncated"), "{damage}");
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&out);
 }

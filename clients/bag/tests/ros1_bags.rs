@@ -431,6 +431,59 @@ fn ros1_bags_unindexed_or_truncated_read_up_to_the_damage() {
     assert!(err.contains("V1.2") && err.contains("cut.bag"), "{err}");
 }
 
+/// Every chunk of a ROS 1 bag claims to decompress to almost 4 GiB (its `size` field): the
+/// reader reports the damage, naming the chunk, before allocating anything (the same guard as
+/// the MCAP reader's), whether it reads through the index, in file order or from memory.
+#[test]
+fn ros1_bag_chunk_sizes_are_checked_before_anything_is_allocated() {
+    let dir = tmp("hostile");
+    let path = dir.join("good.bag");
+    write_ours(&path, Ros1Compression::Lz4);
+    let mut bytes = std::fs::read(&path).unwrap();
+    // The `size=` field of every chunk header: u32 length 9, `size=`, u32 value.
+    let field = b"\x09\x00\x00\x00size=";
+    let mut hits = 0;
+    let mut i = 0;
+    while let Some(p) = bytes[i..].windows(field.len()).position(|w| w == field) {
+        let at = i + p + field.len();
+        bytes[at..at + 4].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+        hits += 1;
+        i = at + 4;
+    }
+    assert!(hits >= 2, "the sample bag has several chunks ({hits})");
+    let mut unindexed = bytes.clone();
+    let at = unindexed
+        .windows(10)
+        .position(|w| w == b"index_pos=")
+        .unwrap()
+        + 10;
+    unindexed[at..at + 8].fill(0);
+    for (name, b) in [("indexed.bag", &bytes), ("unindexed.bag", &unindexed)] {
+        let p = dir.join(name);
+        std::fs::write(&p, b).unwrap();
+        for bag in [
+            Bag::open(&p).unwrap(),
+            Bag::from_bytes(&p, b.to_vec()).unwrap(),
+        ] {
+            let mut n = 0;
+            let report = bag
+                .for_each(&Filter::default(), |_| {
+                    n += 1;
+                    Ok(ControlFlow::Continue(()))
+                })
+                .unwrap();
+            assert_eq!(n, 0, "{name}");
+            let damage = report.damage.expect("damage reported");
+            assert!(
+                damage.contains(name)
+                    && damage.contains("4294967280 bytes once decompressed")
+                    && damage.contains("chunk at byte"),
+                "{damage}"
+            );
+        }
+    }
+}
+
 #[test]
 fn ros1_any_writer_picks_the_format_of_the_path() {
     let dir = tmp("any");

@@ -27,7 +27,7 @@ pub struct Args {
     #[arg(long)]
     id: String,
     /// Severity: 1..5 for camera, 1..3 for LiDAR perturbations.
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=5))]
     severity: u8,
     /// Seed of every random draw.
     #[arg(long, default_value_t = 0)]

@@ -48,7 +48,7 @@ enum Command {
         /// Perturbation ID or name (see `perturb list`).
         id: String,
         /// Severity: 1..5 for camera, 1..3 for LiDAR perturbations.
-        #[arg(long)]
+        #[arg(long, value_parser = clap::value_parser!(u8).range(1..=5))]
         severity: u8,
         /// Seed (default: the stream's current seed).
         #[arg(long)]
@@ -193,7 +193,7 @@ fn print_stats(streams: &[StreamReport]) {
             println!("{:<16} {:<16} {}", s.name, what, lat(v));
         }
         println!(
-            "{:<16} {:<16} {} of {} frames over the {} ms budget; dropped {} (queue {}, upstream {}, output {}); perturbation failed {}",
+            "{:<16} {:<16} {} of {} frames over the {} ms budget; dropped {} (queue {}, upstream {}, output {}, daemon restart {}); perturbation failed {}",
             s.name,
             "budget",
             s.over_budget,
@@ -203,6 +203,7 @@ fn print_stats(streams: &[StreamReport]) {
             s.dropped_queue,
             s.dropped_upstream,
             s.dropped_output,
+            s.dropped_restart,
             s.perturb_failed
         );
     }

@@ -546,3 +546,58 @@ fn demo_writes_outputs() {
     assert!(out.contains("C-A1"), "{out}");
     assert!(Path::new(&d.join("clean.png")).exists() && d.join("clean.pcd").exists());
 }
+
+#[test]
+fn a_bag_with_a_4_gib_string_length_is_reported_under_a_memory_limit() {
+    use perturb_bag::{BagWriter, Compression, WriterOptions};
+    let dir = tmp("hostile_bag");
+    let bag = dir.join("bag");
+    let mut w = BagWriter::create(
+        &bag,
+        &WriterOptions {
+            compression: Compression::Zstd,
+            chunk_size: 64 << 10,
+        },
+    )
+    .unwrap();
+    let t = w
+        .add_topic("/lidar/points", "sensor_msgs/msg/PointCloud2")
+        .unwrap();
+    let c = perturb_core::cloud::Cloud::from_xyzi(
+        &perturb_core::cloud::PointLayout::xyzir(),
+        &[[1.0, 2.0, 3.0, 4.0]; 10],
+    );
+    let h = perturb_core::formats::ros::Header {
+        stamp_sec: 1,
+        stamp_nanosec: 2,
+        frame_id: "velodyne",
+    };
+    let msg = perturb_core::formats::ros::PointCloud2Msg::from_view(h, &c.view()).encode();
+    w.write(t, 1, 1, &msg).unwrap();
+    w.finish().unwrap();
+    let file = std::fs::read_dir(&bag)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .unwrap();
+    let mut bytes = std::fs::read(&file).unwrap();
+    // The Header record's profile string length (right after the magic, opcode and length).
+    bytes[17..21].copy_from_slice(&4_294_967_054u32.to_le_bytes());
+    let bad = dir.join("bad.mcap");
+    std::fs::write(&bad, &bytes).unwrap();
+    let o = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 1500000 && exec '{}' info '{}'",
+            env!("CARGO_BIN_EXE_perturb"),
+            bad.display()
+        ))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "not a clean error: {err}");
+    assert!(
+        err.contains("Header record profile") && err.contains("bad.mcap"),
+        "{err}"
+    );
+}

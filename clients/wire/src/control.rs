@@ -109,7 +109,8 @@ pub struct StreamReport {
     pub frames_in: u64,
     /// Frames published on the output service.
     pub frames_out: u64,
-    /// Frames dropped, all causes: `dropped_queue + dropped_upstream + dropped_output`.
+    /// Frames dropped, all causes: `dropped_queue + dropped_upstream + dropped_output +
+    /// dropped_restart`.
     pub dropped: u64,
     /// Dropped because the worker fell behind (oldest pending frame replaced).
     pub dropped_queue: u64,
@@ -118,6 +119,10 @@ pub struct StreamReport {
     pub dropped_upstream: u64,
     /// Perturbed but could not be published (no output sample, transport failure).
     pub dropped_output: u64,
+    /// Taken in by a daemon that was killed before it published them (counted by the daemon
+    /// that replaced it).
+    #[serde(default)]
+    pub dropped_restart: u64,
     /// Frames refused as invalid (counted, logged, skipped).
     pub invalid: u64,
     /// Frames whose perturbation failed; forwarded unperturbed (their header says so).
@@ -169,6 +174,22 @@ impl ControlResponse {
     }
 }
 
+/// `perturb ctl` clients the control service accepts at once (each is an iceoryx2 node with a
+/// client and a notifier on the service; a killed one holds its place until swept).
+pub const MAX_CLIENTS: usize = 64;
+
+/// How long [`ControlClient::connect`] retries a full control service.
+pub const CONNECT_RETRY: Duration = Duration::from_secs(3);
+
+/// True for the iceoryx2 errors of a service that is full (too many nodes, clients or
+/// notifiers), which go away when other clients leave.
+fn is_capacity(e: &WireError) -> bool {
+    match e {
+        WireError::Iceoryx { detail, .. } => detail.contains("ExceedsMax"),
+        _ => false,
+    }
+}
+
 type RrClient = Client<Ipc, [u8], (), [u8], ()>;
 type RrServer = Server<Ipc, [u8], (), [u8], ()>;
 
@@ -188,8 +209,33 @@ impl std::fmt::Debug for ControlClient {
 }
 
 impl ControlClient {
-    /// Connects to the daemon's control service (which must exist).
+    /// Connects to the daemon's control service (which must exist). When the service is full
+    /// (more `perturb ctl` clients at once than [`MAX_CLIENTS`], or dead clients not swept yet),
+    /// it retries for up to [`CONNECT_RETRY`] before giving up with [`WireError::Busy`].
     pub fn connect(transport: &Transport, service: &str) -> WireResult<Self> {
+        let start = Instant::now();
+        let mut pause = Duration::from_millis(5);
+        loop {
+            match Self::try_connect(transport, service) {
+                Err(e) if is_capacity(&e) => {
+                    if start.elapsed() >= CONNECT_RETRY {
+                        return Err(WireError::Busy {
+                            service: service.to_string(),
+                            detail: format!(
+                                "more `perturb ctl` clients at once than it accepts ({MAX_CLIENTS}); retried for {:.1} s, try again",
+                                CONNECT_RETRY.as_secs_f64()
+                            ),
+                        });
+                    }
+                    std::thread::sleep(pause);
+                    pause = (pause * 2).min(Duration::from_millis(100));
+                }
+                other => return other,
+            }
+        }
+    }
+
+    fn try_connect(transport: &Transport, service: &str) -> WireResult<Self> {
         let name = service_name(service)?;
         let not_running = |e: &dyn std::fmt::Debug| {
             let d = format!("{e:?}");
@@ -300,7 +346,8 @@ impl ControlServer {
             .service_builder(&name)
             .request_response::<[u8], [u8]>()
             .max_servers(2)
-            .max_clients(16)
+            .max_clients(MAX_CLIENTS)
+            .max_nodes(MAX_CLIENTS + 8)
             .open_or_create()
             .map_err(|e| crate::transport::open_error(service, e))?;
         let ev = transport
@@ -308,7 +355,8 @@ impl ControlServer {
             .service_builder(&name)
             .event()
             .max_listeners(4)
-            .max_notifiers(32)
+            .max_notifiers(MAX_CLIENTS + 8)
+            .max_nodes(MAX_CLIENTS + 8)
             .open_or_create()
             .map_err(|e| crate::transport::open_error(service, e))?;
         let server = rr

@@ -76,6 +76,14 @@ pub enum WireError {
         /// The service name.
         service: String,
     },
+    /// The service is full (too many clients at once) and stayed full while retrying.
+    #[error("iceoryx2 service `{service}` is busy: {detail}")]
+    Busy {
+        /// The service name.
+        service: String,
+        /// How full, and what to do.
+        detail: String,
+    },
     /// A configuration value is wrong.
     #[error("{0}")]
     Config(String),

@@ -28,14 +28,16 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 4] = *b"PTRB";
 /// The wire format version this build reads and writes. Bumped on every incompatible change of
 /// [`FrameHeader`]; the iceoryx2 type name carries it too.
-pub const WIRE_VERSION: u16 = 1;
+pub const WIRE_VERSION: u16 = 2;
 /// Most PointCloud2 fields a header can describe. Velodyne drivers publish 6, Ouster 9, Hesai 6,
 /// Livox 7; a cloud with more fields is refused with a clear error at publish time.
 pub const MAX_FIELDS: usize = 16;
 /// Longest PointField name, in bytes (UTF-8).
 pub const FIELD_NAME_LEN: usize = 32;
-/// Longest `frame_id`, in bytes (UTF-8).
-pub const FRAME_ID_LEN: usize = 64;
+/// Longest `frame_id`, in bytes (UTF-8). ROS puts no limit on it; real frame_ids are short
+/// (`camera_front`, `velodyne_top`, a few namespaced ones reach 60-100 bytes). A longer one is
+/// refused with [`WireError::TooLong`] naming it, and the bridge counts the message as bad.
+pub const FRAME_ID_LEN: usize = 256;
 /// Longest image encoding string, in bytes.
 pub const ENCODING_LEN: usize = 32;
 /// Longest perturbation ID, in bytes.
@@ -115,13 +117,13 @@ impl WireField {
     };
 }
 
-/// The user header of every camera and LiDAR sample (968 bytes, `#[repr(C)]`, no pointers).
+/// The user header of every camera and LiDAR sample (1160 bytes, `#[repr(C)]`, no pointers).
 ///
 /// All integers are in the host's byte order (shared memory never leaves the machine). Text fields
 /// are UTF-8, NUL-padded. The iceoryx2 type name `perturb::FrameHeader.v<WIRE_VERSION>` makes
 /// iceoryx2 itself refuse to connect a peer compiled against another version of this struct.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ZeroCopySend)]
-#[type_name("perturb::FrameHeader.v1")]
+#[type_name("perturb::FrameHeader.v2")]
 #[repr(C)]
 pub struct FrameHeader {
     /// [`MAGIC`].
@@ -671,7 +673,7 @@ mod tests {
     #[test]
     fn header_is_plain_and_stable() {
         assert_eq!(std::mem::size_of::<WireField>(), 48);
-        assert_eq!(std::mem::size_of::<FrameHeader>(), 968);
+        assert_eq!(std::mem::size_of::<FrameHeader>(), 1160);
         assert_eq!(std::mem::align_of::<FrameHeader>(), 8);
     }
 
@@ -734,5 +736,18 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("frame_id"), "{e}");
+    }
+
+    #[test]
+    fn frame_ids_of_up_to_256_bytes_pass_through() {
+        let layout = perturb_core::synthetic::velodyne_layout();
+        let id = format!("/{}", "vehicle/sensors/lidar_".repeat(11));
+        assert!(id.len() > 64 && id.len() <= FRAME_ID_LEN, "{}", id.len());
+        let full = "f".repeat(FRAME_ID_LEN);
+        for frame_id in [id.as_str(), full.as_str()] {
+            let h =
+                FrameHeader::cloud(0, Stamp::default(), frame_id, &layout, 0, 1, 0, true).unwrap();
+            assert_eq!(h.frame_id().unwrap(), frame_id);
+        }
     }
 }

@@ -24,6 +24,18 @@ type FramePorts = (Subscriber<Ipc, [u8], FrameHeader>, Listener<Ipc>);
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Origin(u128);
 
+impl Origin {
+    /// The publisher's iceoryx2 id as a number (to store it, e.g. across a restart).
+    pub fn raw(self) -> u128 {
+        self.0
+    }
+
+    /// An origin from [`Origin::raw`].
+    pub fn from_raw(raw: u128) -> Self {
+        Origin(raw)
+    }
+}
+
 /// A received frame: the shared-memory sample, read in place. Dropping it hands the memory back
 /// to the publisher. Frames may be sent to another thread.
 pub struct Frame {
@@ -121,8 +133,9 @@ pub struct FrameSubscriber {
     buffer: usize,
     pubsub: PubSub,
     event: event::PortFactory<Ipc>,
-    subscriber: Subscriber<Ipc, [u8], FrameHeader>,
-    listener: Listener<Ipc>,
+    /// The ports; `None` only inside [`FrameSubscriber::reopen`], between dropping the old
+    /// ones and creating the new ones.
+    ports: Option<FramePorts>,
     reconnects: u64,
 }
 
@@ -146,14 +159,13 @@ impl FrameSubscriber {
             .unwrap_or(qos.subscriber_buffer)
             .clamp(1, qos.subscriber_buffer);
         let (pubsub, event) = open_pubsub(node, service, qos)?;
-        let (subscriber, listener) = Self::ports(&pubsub, &event, service, buffer)?;
+        let ports = Self::ports(&pubsub, &event, service, buffer)?;
         Ok(FrameSubscriber {
             service: service.to_string(),
             buffer,
             pubsub,
             event,
-            subscriber,
-            listener,
+            ports: Some(ports),
             reconnects: 0,
         })
     }
@@ -178,10 +190,16 @@ impl FrameSubscriber {
 
     /// Replaces the iceoryx2 ports with new ones (after a transport failure).
     pub fn reopen(&mut self) -> WireResult<()> {
-        // Drop the old ports first so the service has room for the new ones.
-        let (s, l) = Self::ports(&self.pubsub, &self.event, &self.service, self.buffer)?;
-        self.subscriber = s;
-        self.listener = l;
+        // Drop the old ports first so the service has room for the new ones (creating them
+        // first failed with ExceedsMaxSupportedSubscribers on a service sized to the ports in
+        // use). Until new ones exist, `receive` and `wait` return an error asking to reopen.
+        self.ports = None;
+        self.ports = Some(Self::ports(
+            &self.pubsub,
+            &self.event,
+            &self.service,
+            self.buffer,
+        )?);
         self.reconnects += 1;
         Ok(())
     }
@@ -201,20 +219,45 @@ impl FrameSubscriber {
         self.pubsub.dynamic_config().number_of_publishers()
     }
 
+    fn ports_or_err(&self) -> WireResult<&FramePorts> {
+        self.ports.as_ref().ok_or_else(|| {
+            WireError::iox(
+                format!("`{}`", self.service),
+                "the ports could not be created again: call reopen",
+            )
+        })
+    }
+
+    /// False after a [`FrameSubscriber::reopen`] that failed (until one succeeds).
+    pub fn has_ports(&self) -> bool {
+        self.ports.is_some()
+    }
+
     /// The listener to attach to a WaitSet.
+    ///
+    /// # Panics
+    /// After a failed [`FrameSubscriber::reopen`] (see [`FrameSubscriber::has_ports`]; the
+    /// subscriber has no ports until a reopen succeeds).
     pub fn listener(&self) -> &Listener<Ipc> {
-        &self.listener
+        &self
+            .ports
+            .as_ref()
+            .expect("the ports exist (a failed reopen must be retried)")
+            .1
     }
 
     /// Consumes pending wake-ups (call before draining frames with [`FrameSubscriber::receive`]).
     pub fn drain_notifications(&self) {
-        let _ = self.listener.try_wait(|_| {});
+        if let Some((_, l)) = &self.ports {
+            let _ = l.try_wait(|_| {});
+        }
     }
 
     /// The next frame, if one is queued. On a transport failure (other than holding too many
     /// frames, see [`WireError::is_borrow_limit`]) call [`FrameSubscriber::reopen`].
     pub fn receive(&self) -> WireResult<Option<Frame>> {
-        self.subscriber
+        self.ports_or_err()?
+            .0
             .receive()
             .map(|s| s.map(|sample| Frame { sample }))
             .map_err(|e| {
@@ -233,9 +276,12 @@ impl FrameSubscriber {
         if let Some(f) = self.receive()? {
             return Ok(Some(f));
         }
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(|e| WireError::iox(format!("waiting on `{}`", self.service), e))?;
+        match self.ports_or_err()?.1.timed_wait(|_| {}, timeout) {
+            // A signal cut the wait short (SIGCONT after SIGSTOP, a profiler's SIGPROF): not a
+            // transport failure, just look for frames.
+            Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
+            Err(e) => return Err(WireError::iox(format!("waiting on `{}`", self.service), e)),
+        }
         self.drain_notifications();
         self.receive()
     }

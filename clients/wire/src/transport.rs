@@ -296,9 +296,21 @@ impl std::fmt::Debug for Transport {
     }
 }
 
+/// iceoryx2 logs to stderr itself, its warnings with a `Debug` dump of the object concerned (a
+/// node that could not remove a dead peer's records printed a 6 kB line on a daemon restart).
+/// Every iceoryx2 failure reaches this crate as an error that is reported in words, so iceoryx2's
+/// own log is limited to its errors, unless `IOX2_LOG_LEVEL` asks for more.
+fn quiet_iceoryx2_log() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    });
+}
+
 impl Transport {
     /// Joins the namespace `options` describes with a node called `node_name`.
     pub fn open(node_name: &str, options: &TransportOptions) -> WireResult<Self> {
+        quiet_iceoryx2_log();
         let config = options.iceoryx2()?;
         let name = NodeName::new(node_name)
             .map_err(|e| WireError::Config(format!("node name `{node_name}`: {e:?}")))?;
@@ -365,6 +377,7 @@ impl Transport {
 
 /// [`Transport::sweep_dead_nodes`] for a config without a node of one's own.
 pub fn sweep_dead_nodes(config: &Config) -> WireResult<SweepReport> {
+    quiet_iceoryx2_log();
     let mut report = SweepReport::default();
     Node::<Ipc>::list(config, |state| {
         match state {

@@ -138,3 +138,29 @@ fn control_client_without_daemon_says_so() {
         .to_string();
     assert!(e.contains("no perturbd"), "{e}");
 }
+
+/// Reopening a subscriber on a service sized for exactly the subscribers in use works: the old
+/// ports are dropped first. (It failed with ExceedsMaxSupportedSubscribers, which a recorder
+/// resumed after SIGSTOP logged as a bad message.)
+#[test]
+fn a_subscriber_reopens_on_a_service_without_spare_room() {
+    let Pair(_clean, a, b) = pair("reopen");
+    let qos = StreamQos {
+        max_subscribers: 1,
+        ..StreamQos::default()
+    };
+    let mut sub = b.subscriber("cam/raw", &qos, None).unwrap();
+    let mut publisher = a.publisher("cam/raw", &qos, Hop::Ingress, 16).unwrap();
+    assert!(publisher.wait_for_subscribers(1, Duration::from_secs(5)));
+    sub.reopen()
+        .expect("reopen without a spare subscriber slot");
+    assert!(sub.has_ports());
+    assert_eq!(sub.reconnects(), 1);
+    assert!(publisher.wait_for_subscribers(1, Duration::from_secs(5)));
+    let img = synthetic::street_image(8, 4, 1);
+    let h =
+        FrameHeader::for_image_view(5, Stamp { sec: 1, nanosec: 0 }, "cam", &img.view()).unwrap();
+    assert_eq!(publisher.publish_image(h, &img.view()).unwrap(), 1);
+    let frame = sub.wait(Duration::from_secs(5)).unwrap().expect("frame");
+    assert_eq!(frame.header().seq, 5);
+}

@@ -4,8 +4,12 @@ use crate::error::{Error, Result};
 use crate::image::{Image, ImageView, PixelFormat};
 use ::image::{DynamicImage, ImageFormat};
 
-/// Decodes a PNG or JPEG into rgb8, rgba8 or mono8 (16-bit and palette images are converted to
-/// 8 bits; grey with alpha becomes rgba8).
+/// Decodes a PNG or JPEG into rgb8, rgba8 or mono8, as stored (palette images are expanded to
+/// the rgb8 or rgba8 they stand for, which loses nothing).
+///
+/// Images the perturbations cannot keep in their format are refused with an error naming the
+/// format, instead of being converted behind the caller's back: 16-bit grey or colour (it would
+/// lose its low byte) and grey with alpha (it would come back as rgba8).
 pub fn decode(bytes: &[u8]) -> Result<Image> {
     let fmt = ::image::guess_format(bytes)
         .map_err(|e| Error::malformed("image", format!("not a PNG or JPEG: {e}")))?;
@@ -21,12 +25,31 @@ pub fn decode(bytes: &[u8]) -> Result<Image> {
     };
     let img = ::image::load_from_memory_with_format(bytes, fmt)
         .map_err(|e| Error::malformed(name, e.to_string()))?;
-    Ok(from_dynamic(img))
+    from_dynamic(img, name)
 }
 
-fn from_dynamic(img: DynamicImage) -> Image {
+/// Describes a colour type the perturbations do not handle, and what to do about it.
+fn unsupported(color: ::image::ColorType) -> String {
+    use ::image::ColorType as C;
+    let what = match color {
+        C::L16 => "16-bit grey",
+        C::La8 => "8-bit grey with alpha",
+        C::La16 => "16-bit grey with alpha",
+        C::Rgb16 => "16-bit RGB",
+        C::Rgba16 => "16-bit RGBA",
+        C::Rgb32F => "32-bit float RGB",
+        C::Rgba32F => "32-bit float RGBA",
+        _ => "an unusual colour type",
+    };
+    format!(
+        "the image is {what} ({color:?}); the perturbations work on 8-bit grey, RGB and RGBA images and would have to convert it, changing its format: convert it yourself first (e.g. to 8 bits per channel, or grey with alpha to RGBA)"
+    )
+}
+
+fn from_dynamic(img: DynamicImage, name: &'static str) -> Result<Image> {
     let (w, h) = (img.width(), img.height());
-    match img {
+    let color = img.color();
+    let image = match img {
         DynamicImage::ImageLuma8(b) => {
             Image::from_vec(b.into_raw(), w, h, w as usize, PixelFormat::Mono8)
         }
@@ -36,20 +59,9 @@ fn from_dynamic(img: DynamicImage) -> Image {
         DynamicImage::ImageRgba8(b) => {
             Image::from_vec(b.into_raw(), w, h, w as usize * 4, PixelFormat::Rgba8)
         }
-        DynamicImage::ImageLuma16(_) => {
-            let b = img.to_luma8();
-            Image::from_vec(b.into_raw(), w, h, w as usize, PixelFormat::Mono8)
-        }
-        other if other.color().has_alpha() => {
-            let b = other.to_rgba8();
-            Image::from_vec(b.into_raw(), w, h, w as usize * 4, PixelFormat::Rgba8)
-        }
-        other => {
-            let b = other.to_rgb8();
-            Image::from_vec(b.into_raw(), w, h, w as usize * 3, PixelFormat::Rgb8)
-        }
-    }
-    .expect("tight buffers from the decoder")
+        _ => return Err(Error::malformed(name, unsupported(color))),
+    };
+    Ok(image.expect("tight buffers from the decoder"))
 }
 
 /// Tightly packed rgb8/rgba8/mono8 bytes for the encoder (bgr formats are swapped to rgb).
@@ -115,5 +127,37 @@ mod tests {
         let png = encode_png(&img.view()).unwrap();
         let err = decode(&png[..png.len() / 2]).unwrap_err();
         assert!(err.to_string().contains("PNG"), "{err}");
+    }
+
+    fn png_of(data: &[u8], w: u32, h: u32, color: ::image::ExtendedColorType) -> Vec<u8> {
+        use ::image::ImageEncoder;
+        let mut out = Vec::new();
+        ::image::codecs::png::PngEncoder::new(&mut out)
+            .write_image(data, w, h, color)
+            .unwrap();
+        out
+    }
+
+    #[test]
+    fn sixteen_bit_and_grey_alpha_are_refused_not_converted() {
+        use ::image::ExtendedColorType as C;
+        for (color, bytes_per_pixel, says) in [
+            (C::L16, 2, "16-bit grey"),
+            (C::Rgb16, 6, "16-bit RGB"),
+            (C::La8, 2, "grey with alpha"),
+        ] {
+            let png = png_of(&vec![7u8; 4 * 3 * bytes_per_pixel], 4, 3, color);
+            let err = decode(&png).unwrap_err().to_string();
+            assert!(err.contains(says) && err.contains("PNG"), "{err}");
+        }
+        // 8-bit grey, RGB and RGBA keep their format.
+        for (color, n, format) in [
+            (C::L8, 1, PixelFormat::Mono8),
+            (C::Rgb8, 3, PixelFormat::Rgb8),
+            (C::Rgba8, 4, PixelFormat::Rgba8),
+        ] {
+            let png = png_of(&vec![9u8; 4 * 3 * n], 4, 3, color);
+            assert_eq!(decode(&png).unwrap().format, format);
+        }
     }
 }

@@ -9,7 +9,8 @@ use super::{
     OP_MSG_DATA, Record, record_at, time_ns,
 };
 use crate::BagError;
-use crate::read::{BagMessage, Filter, ReadReport, TopicInfo};
+use crate::guard;
+use crate::read::{BagMessage, Bytes, Filter, ReadReport, TopicInfo};
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::io::Read;
@@ -28,7 +29,7 @@ struct ChunkInfo {
 /// An open ROS 1 bag.
 pub(crate) struct Ros1Bag {
     pub(crate) path: PathBuf,
-    map: memmap2::Mmap,
+    map: Bytes,
     /// Offset of the first record after the bag header.
     first_record: usize,
     conns: BTreeMap<u32, Connection>,
@@ -49,8 +50,8 @@ impl Ros1Bag {
         head.starts_with(b"#ROSBAG V")
     }
 
-    /// Opens a mapped file that [`Self::sniff`] recognised.
-    pub(crate) fn open(path: &Path, map: memmap2::Mmap) -> Result<Self, BagError> {
+    /// Opens a file (mapped or in memory) that [`Self::sniff`] recognised.
+    pub(crate) fn open(path: &Path, map: Bytes) -> Result<Self, BagError> {
         let not = |reason: String| BagError::NotMcap {
             path: path.to_path_buf(),
             reason,
@@ -385,7 +386,7 @@ impl Ros1Bag {
         if r.op()? != OP_CHUNK {
             return Err(format!("no chunk record at byte {pos}"));
         }
-        Ok((decompress(&r, pos)?, r.end))
+        Ok((decompress(&r, pos, self.map.len() as u64)?, r.end))
     }
 
     /// Reads every record in file order, calling `f(connection, time, data)` for each message
@@ -423,7 +424,7 @@ impl Ros1Bag {
                 if r.op()? != OP_CHUNK {
                     return Ok((deliver(&r)?, r.end));
                 }
-                let data = decompress(&r, pos)?;
+                let data = decompress(&r, pos, self.map.len() as u64)?;
                 let mut at = 0;
                 while at < data.len() {
                     let inner =
@@ -481,25 +482,30 @@ fn message<'a>(
     }
 }
 
-/// The uncompressed data of a chunk record at byte `pos`.
-fn decompress<'a>(r: &Record<'a>, pos: usize) -> Result<Cow<'a, [u8]>, String> {
+/// The uncompressed data of a chunk record at byte `pos` of a file of `file_len` bytes. The
+/// claimed size is held to [`guard::decompressed_bound`] before anything is allocated, and the
+/// decompressor is never allowed to produce more than it (a damaged or hostile chunk is damage,
+/// not a 4 GiB allocation).
+fn decompress<'a>(r: &Record<'a>, pos: usize, file_len: u64) -> Result<Cow<'a, [u8]>, String> {
     let compression = r.text("compression")?;
-    let size = r.u32("size")? as usize;
+    let claimed = r.u32("size")?;
+    guard::check_decompressed("chunk", pos as u64, claimed as u64, file_len)?;
+    let size = claimed as usize;
+    let inflate = |what: &str, reader: &mut dyn Read| -> Result<Vec<u8>, String> {
+        let mut out = Vec::with_capacity(size);
+        reader
+            .take(size as u64 + 1)
+            .read_to_end(&mut out)
+            .map_err(|e| format!("{what} chunk at byte {pos}: {e}"))?;
+        Ok(out)
+    };
     let out = match compression {
         "none" => Cow::Borrowed(r.data),
-        "bz2" => {
-            let mut out = Vec::with_capacity(size);
-            bzip2::read::BzDecoder::new(r.data)
-                .read_to_end(&mut out)
-                .map_err(|e| format!("bz2 chunk at byte {pos}: {e}"))?;
-            Cow::Owned(out)
-        }
+        "bz2" => Cow::Owned(inflate("bz2", &mut bzip2::read::BzDecoder::new(r.data))?),
         "lz4" => {
-            let mut out = Vec::with_capacity(size);
-            lz4::Decoder::new(r.data)
-                .and_then(|mut d| d.read_to_end(&mut out))
-                .map_err(|e| format!("lz4 chunk at byte {pos}: {e}"))?;
-            Cow::Owned(out)
+            let mut d =
+                lz4::Decoder::new(r.data).map_err(|e| format!("lz4 chunk at byte {pos}: {e}"))?;
+            Cow::Owned(inflate("lz4", &mut d)?)
         }
         other => {
             return Err(format!(
