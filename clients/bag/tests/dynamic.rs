@@ -10,7 +10,6 @@ use serde_json::json;
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
-use std::process::Command;
 
 /// The shared data folder; None (skip) when absent, a failure under CI=true.
 fn shared(test: &str) -> Option<PathBuf> {
@@ -29,32 +28,12 @@ fn shared(test: &str) -> Option<PathBuf> {
     None
 }
 
-/// Runs a Python script if its modules import; fails when they are required
-/// (PERTURB_REQUIRE_ORACLES=1, as CI sets) and missing.
+#[path = "../../../tests/support/python_oracle.rs"]
+mod python_oracle;
+
+/// [`python_oracle::python_oracle`] with the bag tests' install hint.
 fn python(modules: &str, script: &str, args: &[&str]) -> Option<String> {
-    let probe = Command::new("python3")
-        .args(["-c", &format!("import {modules}")])
-        .output();
-    if !probe.as_ref().is_ok_and(|o| o.status.success()) {
-        assert!(
-            std::env::var_os("PERTURB_REQUIRE_ORACLES").is_none(),
-            "python modules {modules} are required but missing (pip install rosbags mcap numpy)"
-        );
-        eprintln!("skipping the check: python3 -c 'import {modules}' failed");
-        return None;
-    }
-    let o = Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "python oracle failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    Some(String::from_utf8(o.stdout).unwrap())
+    python_oracle::python_oracle(modules, "pip install rosbags mcap numpy", script, args)
 }
 
 /// Flattens a message as `[[path, leaf], ...]` where byte arrays become `{len, sum}` with a

@@ -4,34 +4,18 @@ mod common;
 
 use common::{fails, ok, perturb, shared, tmp};
 use std::path::Path;
-use std::process::Command;
 
-/// Runs a Python check script if the oracle packages are installed; fails when they are required
-/// (CI sets PERTURB_REQUIRE_ORACLES=1) and missing.
+#[path = "../../../tests/support/python_oracle.rs"]
+mod python_oracle;
+
+/// [`python_oracle::python_oracle`] with the CLI tests' install hint.
 fn python_oracle(module: &str, script: &str, args: &[&str]) -> Option<String> {
-    let probe = Command::new("python3")
-        .args(["-c", &format!("import {module}")])
-        .output();
-    if !probe.as_ref().is_ok_and(|o| o.status.success()) {
-        assert!(
-            std::env::var_os("PERTURB_REQUIRE_ORACLES").is_none(),
-            "python module {module} is required but missing"
-        );
-        eprintln!("skipping the {module} check: python3 -c 'import {module}' failed");
-        return None;
-    }
-    let o = Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "python oracle failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    Some(String::from_utf8(o.stdout).unwrap())
+    python_oracle::python_oracle(
+        module,
+        "pip install rosbags mcap mcap-ros2-support",
+        script,
+        args,
+    )
 }
 
 const ROSBAGS_COUNT: &str = r#"

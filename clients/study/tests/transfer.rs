@@ -8,34 +8,13 @@
 use perturb_study::stats::resample;
 use perturb_study::transfer::{TransferConfig, read_table, transfer};
 use std::collections::BTreeMap;
-use std::process::Command;
 
-/// Runs a Python script if its modules import; fails when they are required
-/// (PERTURB_REQUIRE_ORACLES=1, as CI sets) and missing.
+#[path = "../../../tests/support/python_oracle.rs"]
+mod python_oracle;
+
+/// [`python_oracle::python_oracle`] with scipy's install hint.
 fn python(modules: &str, script: &str, args: &[&str]) -> Option<String> {
-    let probe = Command::new("python3")
-        .args(["-c", &format!("import {modules}")])
-        .output();
-    if !probe.as_ref().is_ok_and(|o| o.status.success()) {
-        assert!(
-            std::env::var_os("PERTURB_REQUIRE_ORACLES").is_none(),
-            "python modules {modules} are required but missing (pip install scipy numpy)"
-        );
-        eprintln!("skipping the scipy check: python3 -c 'import {modules}' failed");
-        return None;
-    }
-    let o = Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "python oracle failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    Some(String::from_utf8(o.stdout).unwrap())
+    python_oracle::python_oracle(modules, "pip install scipy numpy", script, args)
 }
 
 const SCIPY: &str = r#"
