@@ -15,7 +15,17 @@ def _missing(what: str):
     """Skips the test, or fails it under CI=true (CI must run every test)."""
     if os.environ.get("CI") == "true":
         pytest.fail(f"{what} is missing and CI=true")
-    pytest.skip(f"{what} is missing")
+    pytest.skip(f"{what} is missing", allow_module_level=True)
+
+
+def need(module: str, install: str):
+    """Imports `module`, or skips the test (fails it under CI=true) naming how to install it."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        _missing(f"{module} ({install})")
 
 
 @pytest.fixture(scope="session")

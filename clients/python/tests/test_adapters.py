@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import perturb
+from conftest import need
 from perturb import adapters
 
 
@@ -11,13 +12,13 @@ def test_transform_on_numpy_and_pil(small):
     t = adapters.Transform("C-C7", 2, seed=3, seq=4)
     expected = perturb.CameraPerturber("C-C7", 2, seed=3)(small, 4)
     assert np.array_equal(t(small), expected)
-    PIL = pytest.importorskip("PIL.Image")
+    PIL = need("PIL.Image", "pip install pillow")
     out = t(PIL.fromarray(small))
     assert isinstance(out, PIL.Image) and np.array_equal(np.asarray(out), expected)
 
 
 def test_albumentations_transform(small):
-    A = pytest.importorskip("albumentations")
+    A = need("albumentations", "pip install albumentations")
     aug = A.Compose([adapters.albumentations_transform("C-B5", 3, seed=1)])
     out = aug(image=small)["image"]
     assert np.array_equal(out, perturb.CameraPerturber("C-B5", 3, seed=1)(small, 0))

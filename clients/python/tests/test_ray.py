@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import perturb
-from conftest import read_png, run
+from conftest import need, read_png, run
 
-ray = pytest.importorskip("ray", reason="ray is missing (pip install 'ray[data]')")
+ray = need("ray", "pip install 'ray[data]'")
 import perturb.ray as pray  # noqa: E402
 
 
