@@ -4,6 +4,7 @@ import filecmp
 import json
 import os
 import shutil
+import tempfile
 
 import numpy as np
 import pytest
@@ -16,20 +17,24 @@ import perturb.ray as pray  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def cluster(tmp_path_factory):
+def cluster():
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    # Ray puts unix sockets under its temp dir, whose paths may not exceed 107 bytes: a short
+    # folder in the system's temp dir, not pytest's (which lives under the target folder).
+    temp = tempfile.mkdtemp(prefix="perturb-ray-")
     ray.init(
         num_cpus=2,
         _node_ip_address="127.0.0.1",
         include_dashboard=False,
         object_store_memory=200 * 1024 * 1024,
-        _temp_dir=str(tmp_path_factory.mktemp("ray")),
+        _temp_dir=temp,
         log_to_driver=False,
         configure_logging=False,
     )
     ray.data.DataContext.get_current().enable_progress_bars = False
     yield
     ray.shutdown()
+    shutil.rmtree(temp, ignore_errors=True)
 
 
 def _tree(root):
