@@ -95,7 +95,13 @@ pub fn decode(bytes: &[u8]) -> Result<PcdFile> {
             "COUNT" => {
                 counts = rest
                     .iter()
-                    .map(|v| num("COUNT", v).map(|c| c as u32))
+                    .map(|v| {
+                        num("COUNT", v).and_then(|c| {
+                            u32::try_from(c).map_err(|_| {
+                                bad(format!("line {line_no}: COUNT `{v}` is too large"))
+                            })
+                        })
+                    })
                     .collect::<Result<_>>()?
             }
             "WIDTH" => width = Some(num("WIDTH", rest.first().copied().unwrap_or(""))?),
@@ -152,19 +158,30 @@ pub fn decode(bytes: &[u8]) -> Result<PcdFile> {
             datatype: dt,
             count: counts[i],
         });
-        offset += (sizes[i] as u32) * counts[i].max(1);
+        offset = (sizes[i] as u32)
+            .checked_mul(counts[i].max(1))
+            .and_then(|b| offset.checked_add(b))
+            .ok_or_else(|| bad("the fields' SIZE x COUNT add up to more than 4 GiB per point"))?;
     }
     let layout = Arc::new(PointLayout::new(fields, offset, false)?);
     let width = width.ok_or_else(|| bad("no WIDTH line"))?;
     let height = height.unwrap_or(1);
-    let n = points.unwrap_or(width * height);
-    if n != width * height {
+    let area = width
+        .checked_mul(height)
+        .ok_or_else(|| bad(format!("WIDTH {width} x HEIGHT {height} overflows")))?;
+    let n = points.unwrap_or(area);
+    if n != area {
         return Err(bad(format!(
             "POINTS {n} is not WIDTH {width} x HEIGHT {height}"
         )));
     }
     let step = layout.point_step as usize;
     let body = &bytes[pos..];
+    // Every point is checked against the bytes that follow before its buffer is allocated: a
+    // header may announce any size, the data decides.
+    n.checked_mul(step)
+        .filter(|b| u32::try_from(*b).is_ok())
+        .ok_or_else(|| bad(format!("{n} points of {step} bytes exceed 4 GiB")))?;
     let mut warnings = Vec::new();
     let data = match data_kind {
         PcdData::Binary => {
@@ -240,6 +257,14 @@ fn dense_xyz(layout: &PointLayout, data: &[u8]) -> bool {
 fn decode_ascii(body: &[u8], layout: &PointLayout, n: usize) -> Result<Vec<u8>> {
     let text = std::str::from_utf8(body).map_err(|_| bad("ascii data is not text"))?;
     let step = layout.point_step as usize;
+    // Each value takes at least one character and a separator.
+    let values: usize = layout.fields.iter().map(|f| f.count.max(1) as usize).sum();
+    if n.saturating_mul(values) > body.len().div_ceil(2) {
+        return Err(bad(format!(
+            "the header announces {n} points of {values} values, more than the {} bytes of ascii data can hold",
+            body.len()
+        )));
+    }
     let mut out = vec![0u8; n * step];
     let mut lines = text.lines().filter(|l| !l.trim().is_empty());
     for (i, point) in out.chunks_exact_mut(step.max(1)).enumerate().take(n) {
@@ -292,6 +317,11 @@ fn decode_compressed(body: &[u8], layout: &PointLayout, n: usize) -> Result<(Vec
             n * step
         )));
     }
+    if usize_ > csize.saturating_mul(LZF_MAX_RATIO) {
+        return Err(bad(format!(
+            "binary_compressed says {csize} compressed bytes expand to {usize_}, more than LZF can ({LZF_MAX_RATIO}x)"
+        )));
+    }
     if body.len() < 8 + csize {
         return Err(bad(format!(
             "binary_compressed says {csize} compressed bytes but only {} follow (truncated?)",
@@ -313,9 +343,12 @@ fn decode_compressed(body: &[u8], layout: &PointLayout, n: usize) -> Result<(Vec
     Ok((out, 8 + csize))
 }
 
+/// The most an LZF stream can expand: a 3-byte back reference copies at most 264 bytes.
+const LZF_MAX_RATIO: usize = 88;
+
 /// Decompresses an LZF stream (liblzf format) of known output size.
 pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>> {
-    let mut out = Vec::with_capacity(out_len);
+    let mut out = Vec::with_capacity(out_len.min(input.len().saturating_mul(LZF_MAX_RATIO)));
     let mut i = 0;
     while i < input.len() {
         let ctrl = input[i] as usize;
@@ -616,6 +649,41 @@ mod tests {
             .unwrap_err();
         assert!(err.to_string().contains("SIZE has 1"), "{err}");
         assert!(decode(b"VERSION 0.7\n").is_err());
+    }
+
+    /// Sizes a header announces are checked against the data before anything is allocated.
+    #[test]
+    fn huge_announced_sizes_are_refused_before_allocating() {
+        let head = |count: &str, width: &str, kind: &str| {
+            format!(
+                "FIELDS x\nSIZE 4\nTYPE F\nCOUNT {count}\nWIDTH {width}\nHEIGHT 1\nDATA {kind}\n"
+            )
+            .into_bytes()
+        };
+        let cases: Vec<(Vec<u8>, &str)> = vec![
+            (head("1", "900000000", "ascii"), "more than the"),
+            (head("4294967296", "1", "ascii"), "COUNT"),
+            (head("4294967295", "2", "ascii"), "4 GiB"),
+            (head("1", "18446744073709551615", "ascii"), "exceed"),
+            (
+                {
+                    let mut b = head("1", "100000000", "binary_compressed");
+                    b.extend_from_slice(&4u32.to_le_bytes());
+                    b.extend_from_slice(&400_000_000u32.to_le_bytes());
+                    b.extend_from_slice(&[0, 0, 0, 0]);
+                    b
+                },
+                "more than LZF",
+            ),
+        ];
+        for (bytes, want) in cases {
+            let err = decode(&bytes).unwrap_err();
+            assert!(err.to_string().contains(want), "{want}: {err}");
+        }
+        let mut wide =
+            b"FIELDS x\nSIZE 4\nTYPE F\nWIDTH 4294967296\nHEIGHT 4294967296\nDATA ascii\n".to_vec();
+        wide.extend_from_slice(b"1\n");
+        assert!(decode(&wide).unwrap_err().to_string().contains("overflows"));
     }
 
     /// The header of `bytes` with `WIDTH`/`POINTS` changed from 300 to `n`.
