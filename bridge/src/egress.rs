@@ -8,6 +8,10 @@ use crate::endpoint::Endpoint;
 use crate::frame::{StreamKind, monotonic_ns};
 use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
 use anyhow::Result;
+use std::time::Duration;
+
+/// How often an egress asks its writer about readers with an incompatible QoS.
+const QOS_CHECK: Duration = Duration::from_millis(500);
 
 /// One egress mapping.
 pub struct Egress {
@@ -50,7 +54,18 @@ impl Adapter for Egress {
         };
         let mut total = Latency::default();
         let mut hops = HopLatency::default();
+        let mut qos_checked = std::time::Instant::now();
+        let mut qos_warned = false;
         while !ctl.stopped() {
+            // A reader whose QoS does not match gets nothing and DDS says nothing: say it once.
+            if !qos_warned && qos_checked.elapsed() >= QOS_CHECK {
+                qos_checked = std::time::Instant::now();
+                if let Some(why) = writer.incompatible_readers() {
+                    tracing::warn!("{name}: {why}");
+                    rep.notes.push(why);
+                    qos_warned = true;
+                }
+            }
             let r = sub.recv(POLL, &mut |meta, payload| {
                 rep.received += 1;
                 if payload.kind() != self.kind {

@@ -41,6 +41,12 @@ pub trait TopicWriter: Send {
     fn dropped(&self) -> u64 {
         0
     }
+
+    /// Readers that asked for a QoS this writer does not offer and therefore receive nothing
+    /// (DDS; ROS 1 has no QoS), with what to change.
+    fn incompatible_readers(&mut self) -> Option<String> {
+        None
+    }
 }
 
 /// Where an ingress or egress opens its topic.
@@ -72,7 +78,7 @@ impl Endpoint {
     /// A writer of `spec`.
     pub fn writer(&self, spec: &TopicSpec) -> anyhow::Result<Box<dyn TopicWriter>> {
         Ok(match self {
-            Endpoint::Dds(d) => Box::new(DdsTopicWriter(d.writer(spec)?)),
+            Endpoint::Dds(d) => Box::new(DdsTopicWriter(d.writer(spec)?, spec.clone())),
             Endpoint::Ros1(n) => Box::new(crate::ros1::TopicWriter1::new(n, spec)?),
         })
     }
@@ -86,10 +92,14 @@ impl TopicReader for DdsTopicReader {
     }
 }
 
-struct DdsTopicWriter(Box<dyn DdsWriter>);
+struct DdsTopicWriter(Box<dyn DdsWriter>, TopicSpec);
 
 impl TopicWriter for DdsTopicWriter {
     fn write(&mut self, _seq: u64, msg: &Payload<'_>) -> anyhow::Result<()> {
         Ok(self.0.write(msg)?)
+    }
+
+    fn incompatible_readers(&mut self) -> Option<String> {
+        self.0.incompatible_readers().map(|r| r.explain(&self.1))
     }
 }

@@ -121,7 +121,7 @@ _DOMAINS = []
 
 
 def qos(args):
-    rel = Policy.Reliability.Reliable(duration=0.1) if args.reliable else Policy.Reliability.BestEffort
+    rel = Policy.Reliability.Reliable(max_blocking_time=100_000_000) if args.reliable else Policy.Reliability.BestEffort
     return Qos(rel, Policy.History.KeepLast(args.depth), Policy.Durability.Volatile)
 
 

@@ -165,6 +165,7 @@ topic = "/perturbed/lidar"
     let mut bridge = Command::new(bridge_exe())
         .args(["--config", cfg.to_str().unwrap()])
         .stdout(Stdio::null())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     let images = peer_lines(pi);
@@ -173,6 +174,12 @@ topic = "/perturbed/lidar"
     assert!(
         status.is_some_and(|s| s.success()),
         "bridge did not stop cleanly: {status:?}"
+    );
+    let mut log = String::new();
+    std::io::Read::read_to_string(&mut bridge.stderr.take().unwrap(), &mut log).unwrap();
+    assert!(
+        !log.contains("does not offer"),
+        "matching QoS reported: {log}"
     );
     assert!(images.len() >= 3, "peer got {} images", images.len());
     assert!(clouds.len() >= 3, "peer got {} clouds", clouds.len());
@@ -364,6 +371,85 @@ perturbed = false
     assert!(bad("/sensing/camera/image_raw ->") >= 1, "{rep}");
     assert!(bad("/sensing/camera/image_raw/compressed") >= 1, "{rep}");
     assert_eq!(bad("/sensing/lidar/points"), 0);
+}
+
+/// A reliable reader on a best-effort egress is never matched by DDS and gets nothing; the
+/// bridge says so once (log and report), naming the policy and the fix.
+fn reliable_reader_on_best_effort_egress(backend: &str, offset: u16) {
+    if !peer_available() || !backend_available(backend) {
+        return;
+    }
+    let dir = scratch(&format!("qos-{backend}"));
+    write_source_bag(&dir.join("src"));
+    let domain = domain(offset);
+    let cfg = dir.join("bridge.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            r#"[bridge]
+bus = "local"
+[dds]
+backend = "{backend}"
+domain_id = {domain}
+interfaces = ["lo"]
+[replay]
+bag = "src"
+loop = true
+rate = 1.0
+[[egress]]
+stream = "cam/image_raw"
+topic = "/perturbed/cam"
+"#
+        ),
+    )
+    .unwrap();
+    let report = dir.join("report.json");
+    let mut bridge = Command::new(bridge_exe())
+        .args(["--config", cfg.to_str().unwrap()])
+        .args(["--report", report.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let peer = Command::new(python())
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/dds_peer.py"))
+        .args(["listen", "--topic", "/perturbed/cam", "--type", "image"])
+        .args(["--count", "1", "--timeout", "4", "--reliable"])
+        .args(["--domain", &domain.to_string(), "--interface", "lo"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let got = peer_lines(peer);
+    let status = interrupt(&mut bridge, Duration::from_secs(10));
+    assert!(status.is_some_and(|s| s.success()), "{status:?}");
+    let mut log = String::new();
+    std::io::Read::read_to_string(&mut bridge.stderr.take().unwrap(), &mut log).unwrap();
+    assert!(got.is_empty(), "DDS matched a reliable reader: {got:?}");
+    let said = log
+        .matches("asked for a QoS this egress does not offer")
+        .count();
+    assert_eq!(said, 1, "said {said} times:\n{log}");
+    assert!(log.contains("RELIABILITY"), "{log}");
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let egress = rep
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["name"].as_str().unwrap().starts_with("egress"))
+        .unwrap();
+    let notes = egress["notes"].to_string();
+    assert!(notes.contains("reliability = \\\"reliable\\\""), "{notes}");
+}
+
+#[test]
+fn rustdds_egress_names_a_reliable_reader_it_cannot_serve() {
+    reliable_reader_on_best_effort_egress("rustdds", 4);
+}
+
+#[test]
+fn cyclone_egress_names_a_reliable_reader_it_cannot_serve() {
+    reliable_reader_on_best_effort_egress("cyclone", 5);
 }
 
 #[test]

@@ -189,6 +189,15 @@ struct PublicationMatched {
     last_subscription_handle: u64,
 }
 
+/// `dds_offered_incompatible_qos_status_t`.
+#[repr(C)]
+#[derive(Default)]
+struct OfferedIncompatibleQos {
+    total_count: u32,
+    total_count_change: i32,
+    last_policy_id: u32,
+}
+
 type Qos = c_void;
 
 /// The libddsc functions the backend uses.
@@ -219,6 +228,8 @@ struct Api {
     qset_history: unsafe extern "C" fn(*mut Qos, u32, i32),
     qset_durability: unsafe extern "C" fn(*mut Qos, u32),
     get_publication_matched_status: unsafe extern "C" fn(Entity, *mut PublicationMatched) -> Ret,
+    get_offered_incompatible_qos_status:
+        unsafe extern "C" fn(Entity, *mut OfferedIncompatibleQos) -> Ret,
     strretcode: unsafe extern "C" fn(Ret) -> *const c_char,
 }
 
@@ -289,6 +300,7 @@ impl Api {
             qset_history: sym!(b"dds_qset_history\0"),
             qset_durability: sym!(b"dds_qset_durability\0"),
             get_publication_matched_status: sym!(b"dds_get_publication_matched_status\0"),
+            get_offered_incompatible_qos_status: sym!(b"dds_get_offered_incompatible_qos_status\0"),
             strretcode: sym!(b"dds_strretcode\0"),
             _lib: lib,
         })
@@ -618,6 +630,16 @@ impl DdsWriter for CycloneWriter {
         // SAFETY: valid writer and out-pointer.
         let rc = unsafe { (self.p.api.get_publication_matched_status)(self.writer, &mut st) };
         (rc >= 0).then_some(st.current_count as usize)
+    }
+
+    fn incompatible_readers(&mut self) -> Option<super::IncompatibleReaders> {
+        let mut st = OfferedIncompatibleQos::default();
+        // SAFETY: valid writer and out-pointer.
+        let rc = unsafe { (self.p.api.get_offered_incompatible_qos_status)(self.writer, &mut st) };
+        (rc >= 0 && st.total_count > 0).then(|| super::IncompatibleReaders {
+            total: st.total_count.into(),
+            policy: super::policy_name(st.last_policy_id),
+        })
     }
 }
 

@@ -225,6 +225,67 @@ pub trait DdsWriter: Send {
     fn write(&mut self, msg: &Payload<'_>) -> Result<(), DdsError>;
     /// How many readers are matched, when the backend knows.
     fn matched(&self) -> Option<usize>;
+    /// Readers seen so far that asked for a QoS this writer does not offer (so DDS never
+    /// matched them and they receive nothing), when the backend reports it.
+    fn incompatible_readers(&mut self) -> Option<IncompatibleReaders>;
+}
+
+/// Readers that requested a QoS the writer does not offer: DDS does not match them, silently.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct IncompatibleReaders {
+    /// How many such readers were seen since the writer was created.
+    pub total: u64,
+    /// The QoS policy the last one disagreed on, in DDS spelling (`RELIABILITY`, `DURABILITY`).
+    pub policy: String,
+}
+
+impl IncompatibleReaders {
+    /// What it means for a writer of `spec` and what to change, in one sentence.
+    pub fn explain(&self, spec: &TopicSpec) -> String {
+        let fix = match (
+            self.policy.as_str(),
+            spec.qos.reliability,
+            spec.qos.durability,
+        ) {
+            ("RELIABILITY", Reliability::BestEffort, _) => {
+                "a reliable reader does not match a best-effort writer: make the reader best effort \
+                 (ROS 2 SensorDataQoS) or set qos = { reliability = \"reliable\" } on this [[egress]]"
+            }
+            ("DURABILITY", _, Durability::Volatile) => {
+                "a transient-local reader does not match a volatile writer: make the reader volatile \
+                 or set qos = { durability = \"transient_local\" } on this [[egress]]"
+            }
+            _ => "compare the reader's QoS with this [[egress]]'s qos",
+        };
+        format!(
+            "{} reader(s) of `{}` asked for a QoS this egress does not offer ({}) and receive nothing; {fix}",
+            self.total, spec.topic, self.policy
+        )
+    }
+}
+
+/// The DDS name of a QoS policy id (the numbering of the DDS specification, which Cyclone's
+/// `dds_qos_policy_id_t` follows).
+pub fn policy_name(id: u32) -> String {
+    match id {
+        1 => "USER_DATA",
+        2 => "DURABILITY",
+        3 => "PRESENTATION",
+        4 => "DEADLINE",
+        5 => "LATENCY_BUDGET",
+        6 => "OWNERSHIP",
+        7 => "OWNERSHIP_STRENGTH",
+        8 => "LIVELINESS",
+        9 => "TIME_BASED_FILTER",
+        10 => "PARTITION",
+        11 => "RELIABILITY",
+        12 => "DESTINATION_ORDER",
+        13 => "HISTORY",
+        14 => "RESOURCE_LIMITS",
+        21 => "DATA_REPRESENTATION",
+        _ => return format!("QoS policy #{id}"),
+    }
+    .to_string()
 }
 
 /// Reads sensor messages from one topic.

@@ -6,7 +6,9 @@
 //! sample is decoded in place from RustDDS's reassembly buffer (no owned message is built).
 
 use super::interfaces::Interface;
-use super::{DdsBackend, DdsError, DdsReader, DdsWriter, Received, RosType, TopicSpec};
+use super::{
+    DdsBackend, DdsError, DdsReader, DdsWriter, IncompatibleReaders, Received, RosType, TopicSpec,
+};
 use crate::frame::Payload;
 use ros2_client::dds::rustdds::{
     self, QosPolicies, RepresentationIdentifier, TopicKind, bytes::Bytes, mio1, no_key,
@@ -191,6 +193,7 @@ impl DdsBackend for RustddsBackend {
         Ok(Box::new(RustddsWriter {
             writer,
             topic: spec.topic.clone(),
+            incompatible: None,
         }))
     }
 
@@ -216,6 +219,7 @@ impl DdsBackend for RustddsBackend {
 struct RustddsWriter {
     writer: no_key::DataWriter<RawCdr, RawWriteAdapter>,
     topic: String,
+    incompatible: Option<IncompatibleReaders>,
 }
 
 impl DdsWriter for RustddsWriter {
@@ -233,6 +237,37 @@ impl DdsWriter for RustddsWriter {
     fn matched(&self) -> Option<usize> {
         None
     }
+
+    fn incompatible_readers(&mut self) -> Option<IncompatibleReaders> {
+        use rustdds::{DataWriterStatus, StatusEvented};
+        while let Some(status) = self.writer.try_recv_status() {
+            if let DataWriterStatus::OfferedIncompatibleQos {
+                count,
+                last_policy_id,
+                ..
+            } = status
+            {
+                self.incompatible = Some(IncompatibleReaders {
+                    total: count.count().max(0) as u64,
+                    policy: rustdds_policy(&format!("{last_policy_id:?}")),
+                });
+            }
+        }
+        self.incompatible.clone()
+    }
+}
+
+/// RustDDS's `QosPolicyId` debug name (`Reliability`, `DestinationOrder`) in DDS spelling
+/// (`RELIABILITY`, `DESTINATION_ORDER`).
+fn rustdds_policy(debug: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in debug.chars().enumerate() {
+        if c.is_uppercase() && i > 0 {
+            out.push('_');
+        }
+        out.push(c.to_ascii_uppercase());
+    }
+    out
 }
 
 struct RustddsReader {
