@@ -1,11 +1,11 @@
 //! What every adapter (a thread of the bridge) gets: the bus, the stop flag and a way to say
 //! that its subscriptions exist (sinks start before sources so no early frame is missed).
 
-use crate::bus::Bus;
+use crate::bus::{Bus, BusSubscriber};
 use crate::stats::AdapterReport;
 use anyhow::Result;
 use crossbeam::channel::Sender;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -15,6 +15,7 @@ pub struct Control {
     stop: Arc<AtomicBool>,
     ready: Option<Sender<()>>,
     why: Arc<Mutex<Option<String>>>,
+    upstream: Arc<AtomicU64>,
 }
 
 impl Control {
@@ -24,6 +25,22 @@ impl Control {
             stop,
             ready,
             why: Arc::default(),
+            upstream: Arc::default(),
+        }
+    }
+
+    /// A context sharing `upstream`: when (monotonic ns) a sink last saw a publisher on a
+    /// stream it reads, 0 if none yet.
+    pub fn with_upstream(mut self, upstream: Arc<AtomicU64>) -> Self {
+        self.upstream = upstream;
+        self
+    }
+
+    /// Notes that `sub`'s stream has a publisher now (for `stop_after_publishers_gone`).
+    pub fn watch_publishers(&self, sub: &dyn BusSubscriber) {
+        if sub.publishers().is_some_and(|n| n > 0) {
+            self.upstream
+                .store(crate::frame::monotonic_ns(), Ordering::Relaxed);
         }
     }
 

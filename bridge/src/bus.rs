@@ -55,6 +55,12 @@ pub trait BusSubscriber {
         timeout: Duration,
         f: &mut dyn FnMut(&FrameMeta, &Payload<'_>),
     ) -> Result<usize>;
+
+    /// Publishers currently connected to the stream side, when the bus knows (iceoryx2: the
+    /// daemon for a perturbed side, a source bridge for a raw side).
+    fn publishers(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// A bus: a factory of publishers and subscribers. Ports are created inside the thread that

@@ -91,6 +91,10 @@ pub struct BridgeSection {
     /// QoS of the iceoryx2 services the bridge opens: must be compatible with the daemon's
     /// `qos` for the same streams (the service is created with the first opener's values).
     pub qos: perturb_wire::StreamQos,
+    /// Seconds: stop once the streams the sinks (egress, record) read have had no publisher
+    /// (perturbd, or a source bridge) for this long, after one was seen. Off by default: an
+    /// egress feeding an ADS never stops on its own.
+    pub stop_after_publishers_gone: Option<f64>,
 }
 
 impl Default for BridgeSection {
@@ -101,6 +105,7 @@ impl Default for BridgeSection {
             report: None,
             iox2: perturb_wire::TransportOptions::default(),
             qos: perturb_wire::StreamQos::default(),
+            stop_after_publishers_gone: None,
         }
     }
 }
@@ -560,6 +565,14 @@ impl Config {
             }
             Ok(())
         };
+        if let Some(t) = self.bridge.stop_after_publishers_gone
+            && !(t.is_finite() && t > 0.0 && t <= 86_400.0)
+        {
+            return Err(err(
+                "bridge.stop_after_publishers_gone".into(),
+                format!("{t} must be a number of seconds in (0, 86400]"),
+            ));
+        }
         if !self.ingress.is_empty() || !self.egress.is_empty() {
             crate::dds::interfaces::resolve(&self.dds.interfaces).map_err(|e| {
                 let problem = match e {
@@ -861,6 +874,11 @@ streams = ["camera_front", "lidar_top"]
         let e = parse("[record]\nout = \"x\"\nstreams = [\"a\"]\ncompression = \"gzip\"\n")
             .unwrap_err();
         assert_eq!(e.key, "record.compression");
+        let e = parse(
+            "[bridge]\nstop_after_publishers_gone = 0\n[record]\nout = \"x\"\nstreams = [\"a\"]\n",
+        )
+        .unwrap_err();
+        assert_eq!(e.key, "bridge.stop_after_publishers_gone");
     }
 
     /// A 16384x16384 synthetic camera pre-rendered 24 GB before it published anything (and

@@ -95,6 +95,7 @@ impl Adapter for Egress {
                 rep.failed += 1;
                 log_bad(&name, rep.failed, &e);
             }
+            ctl.watch_publishers(sub.as_ref());
         }
         rep.dropped = writer.dropped();
         rep.latency = Some(total.summary());

@@ -271,6 +271,10 @@ impl IoxSubscriber {
 }
 
 impl BusSubscriber for IoxSubscriber {
+    fn publishers(&self) -> Option<usize> {
+        Some(self.subscriber.publisher_count())
+    }
+
     fn recv(
         &mut self,
         timeout: Duration,

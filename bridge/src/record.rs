@@ -183,6 +183,7 @@ impl Adapter for Record {
                             bad += 1;
                             log_bad(&name, bad, &e);
                         }
+                        ctl.watch_publishers(sub.as_ref());
                     }
                     if max.is_some_and(|m| got >= m)
                         && done_streams.fetch_add(1, Ordering::SeqCst) + 1 == n_counted

@@ -11,7 +11,7 @@ use crate::config::{BusKind, Config, Transport};
 use crate::dds::{self, DdsBackend, TopicSpec};
 use crate::egress::Egress;
 use crate::endpoint::Endpoint;
-use crate::frame::StreamKind;
+use crate::frame::{StreamKind, monotonic_ns};
 use crate::ingress::Ingress;
 use crate::record::Record;
 use crate::replay::{Replay, ReplayAdapter};
@@ -31,6 +31,9 @@ pub struct Plan {
     pub sources: Vec<Box<dyn Adapter>>,
     /// True if a source runs until stopped (ingress, looped replay, endless synthetic).
     pub endless: bool,
+    /// `[bridge] stop_after_publishers_gone`: stop once the streams the sinks read have had no
+    /// publisher for this long (after one was seen).
+    pub publishers_gone: Option<Duration>,
 }
 
 /// What a configuration resolves to before anything runs: the replay (its bag opened and its
@@ -204,6 +207,10 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
         sinks,
         sources,
         endless,
+        publishers_gone: cfg
+            .bridge
+            .stop_after_publishers_gone
+            .map(Duration::from_secs_f64),
     })
 }
 
@@ -252,6 +259,7 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
     let stop = Arc::new(AtomicBool::new(false));
     let why: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
     let has_sources = !plan.sources.is_empty();
+    let upstream = Arc::new(std::sync::atomic::AtomicU64::new(0));
     let mut handles = Vec::new();
     let spawn =
         |a: Box<dyn Adapter>,
@@ -260,7 +268,9 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
          -> Result<()> {
             let name = a.name();
             let sink = a.is_sink();
-            let ctl = Control::new(stop.clone(), Some(ready)).with_reason(why.clone());
+            let ctl = Control::new(stop.clone(), Some(ready))
+                .with_reason(why.clone())
+                .with_upstream(upstream.clone());
             let bus = bus.clone();
             let h = std::thread::Builder::new()
                 .name(name.chars().take(15).collect())
@@ -338,6 +348,19 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
                 set_why(format!(
                     "every source finished (the sinks had {:.1} s for the last frames)",
                     linger.as_secs_f64()
+                ));
+                stopping();
+                stop.store(true, Ordering::SeqCst);
+                break;
+            }
+        }
+        if let Some(gone) = plan.publishers_gone {
+            let seen = upstream.load(Ordering::Relaxed);
+            if seen != 0 && monotonic_ns().saturating_sub(seen) >= gone.as_nanos() as u64 {
+                set_why(format!(
+                    "the streams this bridge reads have had no publisher for {:.1} s \
+                     (stop_after_publishers_gone)",
+                    gone.as_secs_f64()
                 ));
                 stopping();
                 stop.store(true, Ordering::SeqCst);
