@@ -451,10 +451,16 @@ impl<'a> CloudView<'a> {
     /// The bytes of point `i` (row-major).
     #[inline]
     pub fn point(&self, i: usize) -> &'a [u8] {
-        let w = self.width as usize;
-        let (r, c) = (i / w, i % w);
-        let start = r * self.row_step + c * self.layout.point_step as usize;
-        &self.data[start..start + self.layout.point_step as usize]
+        let step = self.layout.point_step as usize;
+        // Points stored back to back (every unorganised cloud) need no row arithmetic: a
+        // division per point is a large share of reading a field.
+        let start = if self.height <= 1 || self.row_step == self.width as usize * step {
+            i * step
+        } else {
+            let w = self.width as usize;
+            (i / w) * self.row_step + (i % w) * step
+        };
+        &self.data[start..start + step]
     }
 
     /// The underlying bytes.

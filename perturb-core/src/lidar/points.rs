@@ -81,9 +81,10 @@ impl Points {
             if let Some(rr) = layout.reader_any(names::RING) {
                 ring.extend((0..n).map(|i| rr.read_f64(cloud.point(i)).clamp(0.0, 65535.0) as u16));
             } else {
+                let rings = RingTable::new(sensor);
                 ring.extend((0..n).map(|i| {
                     let (x, y, z) = (self.x[i], self.y[i], self.z[i]);
-                    sensor.ring_of_elevation(z.atan2((x * x + y * y).sqrt()))
+                    rings.ring_of_elevation(z.atan2((x * x + y * y).sqrt()))
                 }));
                 self.ring_derived = true;
             }
@@ -124,6 +125,90 @@ impl Points {
     #[inline]
     pub fn intensity(&self, i: usize) -> f32 {
         self.intensity.as_ref().map_or(0.0, |v| v[i])
+    }
+}
+
+/// [`SensorModel::ring_of_elevation`] with the binary search replaced by a table lookup and a
+/// short linear step, giving the same ring for every input: the search's branches are
+/// unpredictable and cost more than the rest of deriving a ring.
+struct RingTable<'a> {
+    sensor: &'a SensorModel,
+    /// Elevations in degrees (ascending).
+    e: &'a [f32],
+    /// `start[b]`: how many elevations lie below the lower edge of bin `b - 1` (a lower bound of
+    /// the count below any angle in bin `b`).
+    start: Vec<u16>,
+    lo: f32,
+    inv_step: f32,
+}
+
+impl<'a> RingTable<'a> {
+    /// Bin width, degrees: a fraction of the finest spacing of any sensor's beams.
+    const STEP_DEG: f32 = 0.05;
+
+    fn new(sensor: &'a SensorModel) -> Self {
+        let e = &sensor.elevations_deg[..];
+        let ascending = e.windows(2).all(|w| w[0] < w[1]) && e.iter().all(|v| v.is_finite());
+        let (lo, hi) = match (e.first(), e.last()) {
+            (Some(&lo), Some(&hi)) if ascending && e.len() < 65_536 => (lo, hi),
+            // Anything unusual: the search itself (no table).
+            _ => {
+                return RingTable {
+                    sensor,
+                    e,
+                    start: Vec::new(),
+                    lo: 0.0,
+                    inv_step: 0.0,
+                };
+            }
+        };
+        let bins = ((hi - lo) / Self::STEP_DEG) as usize + 2;
+        let start = (0..bins)
+            .map(|b| {
+                let edge = lo + b.saturating_sub(1) as f32 * Self::STEP_DEG;
+                e.partition_point(|&v| v < edge) as u16
+            })
+            .collect();
+        RingTable {
+            sensor,
+            e,
+            start,
+            lo,
+            inv_step: 1.0 / Self::STEP_DEG,
+        }
+    }
+
+    #[inline]
+    fn ring_of_elevation(&self, elevation: f32) -> u16 {
+        if self.start.is_empty() {
+            return self.sensor.ring_of_elevation(elevation);
+        }
+        let deg = elevation.to_degrees();
+        let e = self.e;
+        // `i` = how many elevations lie below `deg` (the search's partition point): from the
+        // table's lower bound, step up.
+        let mut i = if deg >= self.lo {
+            let b = ((deg - self.lo) * self.inv_step) as usize;
+            self.start.get(b).map_or(e.len(), |&s| s as usize)
+        } else {
+            0
+        };
+        if i == e.len() {
+            i = e.partition_point(|&v| v < deg);
+        }
+        while i < e.len() && e[i] < deg {
+            i += 1;
+        }
+        if i == 0 {
+            return 0;
+        }
+        if i >= e.len() {
+            return (e.len() - 1) as u16;
+        }
+        // The nearer beam, the lower one on a tie; without a branch (the two are equally
+        // likely, so a branch mispredicts half the time).
+        let upper = (e[i] - deg).abs() < (deg - e[i - 1]).abs();
+        (i - 1 + upper as usize) as u16
     }
 }
 
@@ -316,6 +401,43 @@ mod tests {
             true,
         )
         .unwrap()
+    }
+
+    #[test]
+    fn the_ring_table_gives_the_search_s_ring_for_every_elevation() {
+        for m in [
+            SensorModel::vlp32c(),
+            SensorModel::vlp16(),
+            SensorModel::hdl32e(),
+            SensorModel::hdl64e(),
+            SensorModel::nuscenes(),
+        ] {
+            let t = RingTable::new(&m);
+            assert!(!t.start.is_empty(), "{}", m.name);
+            let mut deg = -40.0f32;
+            let mut all: Vec<f32> = Vec::new();
+            while deg < 40.0 {
+                all.push(deg);
+                deg += 0.001 + deg.abs() * 1e-6;
+            }
+            // The beams themselves, their midpoints and the floats next to them.
+            for w in m.elevations_deg.windows(2) {
+                let mid = (w[0] + w[1]) / 2.0;
+                for v in [w[0], w[1], mid] {
+                    all.extend([v, v.next_up(), v.next_down()]);
+                }
+            }
+            all.extend([f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 90.0, -90.0]);
+            for d in all {
+                let el = d.to_radians();
+                assert_eq!(
+                    t.ring_of_elevation(el),
+                    m.ring_of_elevation(el),
+                    "{} at {d} deg",
+                    m.name
+                );
+            }
+        }
     }
 
     #[test]

@@ -62,13 +62,143 @@ pub struct Flake {
     pub radius: f32,
 }
 
-/// The flakes of one beam, sorted by azimuth.
+/// The flakes of one beam, sorted by azimuth, with an index for the beam test: flakes are
+/// grouped into tiers by range (the nearer, the fewer and the wider), so that finding the flakes
+/// in front of a target within a beam's wedge reads only the tiers nearer than the target, and
+/// in each only the azimuth window its widest flake could reach from, in contiguous memory.
 #[derive(Clone, Debug, Default)]
 pub struct FlakeSet {
     /// Flakes in azimuth order.
     pub flakes: Vec<Flake>,
     /// Largest angular half-width of any flake.
     pub max_half_angle: f32,
+    /// The tiers of [`FlakeSet::TIER_RANGES`], nearest first.
+    tiers: Vec<Tier>,
+}
+
+/// A flake as the wedge search reads it.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    azimuth: f32,
+    range: f32,
+    /// Angular half-width, `asin(min(radius / range, 1))`.
+    half: f32,
+    /// Position in [`FlakeSet::flakes`].
+    k: u32,
+}
+
+/// The flakes of one range class, in azimuth order, with a bucket table of their azimuths.
+#[derive(Clone, Debug, Default)]
+struct Tier {
+    /// The class's lower range bound: no flake of the tier is nearer.
+    min_range: f32,
+    /// Widest half-width in the tier.
+    max_half: f32,
+    entries: Vec<Entry>,
+    /// `bucket[b]`: how many entries have an azimuth below the lower edge of bucket `b - 1` (of
+    /// `bucket.len()` over [-pi, pi)); a lower bound of the search's answer for any azimuth in
+    /// bucket `b`, from which a short forward step finds it.
+    bucket: Vec<u32>,
+}
+
+impl Tier {
+    fn new(min_range: f32, entries: Vec<Entry>) -> Self {
+        let max_half = entries.iter().map(|e| e.half).fold(0.0, f32::max);
+        let n = entries.len().next_power_of_two().clamp(16, 16384);
+        // The edges ascend, so one walk through the (sorted) entries finds every count.
+        let mut below = 0;
+        let bucket = (0..n)
+            .map(|b| {
+                let edge = bucket_edge(b.saturating_sub(1), n);
+                while below < entries.len() && entries[below].azimuth < edge {
+                    below += 1;
+                }
+                below as u32
+            })
+            .collect();
+        Tier {
+            min_range,
+            max_half,
+            entries,
+            bucket,
+        }
+    }
+
+    /// The first entry with an azimuth at or above `lo` (`partition_point(azimuth < lo)`).
+    #[inline]
+    fn start(&self, lo: f32) -> usize {
+        let e = &self.entries;
+        let n = self.bucket.len();
+        let scaled = (lo + std::f32::consts::PI) * (n as f32 / (2.0 * std::f32::consts::PI));
+        let mut k = if scaled >= 0.0 {
+            // (NaN and negatives start at 0.)
+            match self.bucket.get(scaled as usize) {
+                Some(&s) => s as usize,
+                None => return e.partition_point(|x| x.azimuth < lo),
+            }
+        } else {
+            0
+        };
+        while k < e.len() && e[k].azimuth < lo {
+            k += 1;
+        }
+        k
+    }
+}
+
+/// The lower edge of bucket `b` of `n` over [-pi, pi).
+fn bucket_edge(b: usize, n: usize) -> f32 {
+    -std::f32::consts::PI + b as f32 * (2.0 * std::f32::consts::PI / n as f32)
+}
+
+impl FlakeSet {
+    /// Range bounds (metres) between the tiers: flakes nearer than the first, between two
+    /// bounds, beyond the last.
+    pub const TIER_RANGES: [f32; 6] = [1.25, 2.5, 5.0, 10.0, 20.0, 40.0];
+
+    /// A set of `flakes` (sorted here by azimuth) and its index. Flakes must lie off the
+    /// sensor (`range > radius > 0`), as [`flake_set`] makes them.
+    pub fn new(mut flakes: Vec<Flake>) -> Self {
+        flakes.sort_by(|a, b| a.azimuth.total_cmp(&b.azimuth));
+        let entries: Vec<Entry> = flakes
+            .iter()
+            .enumerate()
+            .map(|(k, f)| Entry {
+                azimuth: f.azimuth,
+                range: f.range,
+                half: (f.radius / f.range).min(1.0).asin(),
+                k: k as u32,
+            })
+            .collect();
+        let max_half_angle = entries.iter().map(|e| e.half).fold(0.0, f32::max);
+        let mut lo = 0.0;
+        let mut tiers = Vec::new();
+        for &hi in Self::TIER_RANGES.iter().chain([f32::INFINITY].iter()) {
+            let mine: Vec<Entry> = entries
+                .iter()
+                .filter(|e| e.range >= lo && e.range < hi)
+                .copied()
+                .collect();
+            tiers.push(Tier::new(lo, mine));
+            lo = hi;
+        }
+        FlakeSet {
+            flakes,
+            max_half_angle,
+            tiers,
+        }
+    }
+}
+
+/// Buffers [`beam`] reuses from point to point.
+#[derive(Default)]
+pub struct BeamScratch {
+    /// (range, lo, hi, scan order) of the disks in the wedge.
+    cand: Vec<(f32, f32, f32, u64)>,
+    covered: Vec<(f32, f32)>,
+    pieces: Vec<(f32, f32)>,
+    next: Vec<(f32, f32)>,
+    reflectors: Vec<(f64, f64)>,
 }
 
 /// Generates one beam's disk set: flakes uniform over the 80 m disc, diameters exponential with
@@ -97,15 +227,7 @@ pub fn flake_set(rng: &mut Rng, rr: f64, occ: f64) -> FlakeSet {
             radius: r as f32,
         });
     }
-    flakes.sort_by(|a, b| a.azimuth.total_cmp(&b.azimuth));
-    let max_half_angle = flakes
-        .iter()
-        .map(|f| (f.radius / f.range).min(1.0).asin())
-        .fold(0.0, f32::max);
-    FlakeSet {
-        flakes,
-        max_half_angle,
-    }
+    FlakeSet::new(flakes)
 }
 
 fn xi(r: f64) -> f64 {
@@ -131,89 +253,78 @@ pub enum SnowOutcome {
 /// The occlusion and pulse computation for one beam: the target at range `r0` with intensity `i`
 /// (0..255), azimuth `az`, wedge half-width `half`, flakes `set`.
 pub fn beam(set: &FlakeSet, az: f32, half: f32, r0: f64, i: f64) -> SnowOutcome {
+    beam_with(&mut BeamScratch::default(), set, az, half, r0, i)
+}
+
+/// [`beam`] with buffers kept between calls.
+pub fn beam_with(
+    sc: &mut BeamScratch,
+    set: &FlakeSet,
+    az: f32,
+    half: f32,
+    r0: f64,
+    i: f64,
+) -> SnowOutcome {
     let f = &set.flakes;
     if f.is_empty() || r0 <= 0.0 {
         return SnowOutcome::Clear;
     }
-    let reach = half + set.max_half_angle;
-    // Candidate disks: azimuth within reach (with wrap-around), in front of the target.
-    let mut cand: Vec<(f32, f32, f32)> = Vec::new(); // (range, lo, hi) angular interval relative to az
-    let mut scan = |lo: f32, hi: f32, shift: f32| {
-        let start = f.partition_point(|x| x.azimuth < lo);
-        for fl in &f[start..] {
-            if fl.azimuth > hi {
-                break;
-            }
-            if (fl.range as f64) >= r0 {
-                continue;
-            }
-            let a = (fl.radius / fl.range).min(1.0).asin();
-            let c = fl.azimuth + shift - az;
-            let (l, h) = ((c - a).max(-half), (c + a).min(half));
-            if l < h {
-                cand.push((fl.range, l, h));
-            }
-        }
-    };
-    let pi = std::f32::consts::PI;
-    scan(az - reach, az + reach, 0.0);
-    if az - reach < -pi {
-        scan(az - reach + 2.0 * pi, pi, -2.0 * pi);
-    }
-    if az + reach > pi {
-        scan(-pi, az + reach - 2.0 * pi, 2.0 * pi);
-    }
+    wedge_disks(sc, set, az, half, r0);
+    let cand = &mut sc.cand;
     if cand.is_empty() {
         return SnowOutcome::Clear;
     }
-    // Nearest first: each disk takes the part of the wedge not yet covered.
-    cand.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Nearest first (equal ranges in scan order): each disk takes the part of the wedge not yet
+    // covered.
+    cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.3.cmp(&b.3)));
     let width = 2.0 * half as f64;
-    let mut covered: Vec<(f32, f32)> = Vec::new();
-    let mut reflectors: Vec<(f64, f64)> = Vec::with_capacity(cand.len() + 1); // (range, amplitude)
+    sc.covered.clear();
+    sc.reflectors.clear();
     let mut total = 0.0;
-    for &(range, lo, hi) in &cand {
+    for &(range, lo, hi, _) in cand.iter() {
         // Length of [lo, hi] not yet covered.
-        let mut pieces = vec![(lo, hi)];
-        for &(cl, ch) in &covered {
-            pieces = pieces
-                .into_iter()
-                .flat_map(|(a, b)| {
-                    let mut out = Vec::new();
-                    if cl >= b || ch <= a {
-                        out.push((a, b));
-                    } else {
-                        if a < cl {
-                            out.push((a, cl));
-                        }
-                        if ch < b {
-                            out.push((ch, b));
-                        }
+        sc.pieces.clear();
+        sc.pieces.push((lo, hi));
+        for &(cl, ch) in &sc.covered {
+            sc.next.clear();
+            for &(a, b) in &sc.pieces {
+                if cl >= b || ch <= a {
+                    sc.next.push((a, b));
+                } else {
+                    if a < cl {
+                        sc.next.push((a, cl));
                     }
-                    out
-                })
-                .collect();
+                    if ch < b {
+                        sc.next.push((ch, b));
+                    }
+                }
+            }
+            std::mem::swap(&mut sc.pieces, &mut sc.next);
         }
-        let new: f64 = pieces.iter().map(|(a, b)| (b - a) as f64).sum();
+        let new: f64 = sc.pieces.iter().map(|(a, b)| (b - a) as f64).sum();
         if new <= 0.0 {
             continue;
         }
-        covered.push((lo, hi));
+        sc.covered.push((lo, hi));
         let ratio = new / width;
         total += ratio;
         let r = range as f64;
-        reflectors.push((r, 0.9 * 255.0 * ratio * xi(r) / (r * r)));
+        sc.reflectors
+            .push((r, 0.9 * 255.0 * ratio * xi(r) / (r * r)));
     }
-    if reflectors.is_empty() {
+    if sc.reflectors.is_empty() {
         return SnowOutcome::Clear;
     }
     let rest = (1.0 - total).max(0.0);
-    reflectors.push((r0, i * rest * xi(r0)));
-    // Strongest 10 cm bin of the summed pulses, evaluated where any pulse is.
+    sc.reflectors.push((r0, i * rest * xi(r0)));
+    let reflectors = &sc.reflectors;
+    // Strongest 10 cm bin of the summed pulses, evaluated where any pulse is: each bin once, in
+    // ascending order (the reflectors are in range order), the lowest bin winning a tie.
     let span = C_LIGHT * TAU;
     let (mut best_bin, mut best_p) = (0i64, -1.0);
-    for &(rj, _) in &reflectors {
-        let first = (rj * 10.0).ceil() as i64;
+    let mut done = i64::MIN;
+    for &(rj, _) in reflectors {
+        let first = ((rj * 10.0).ceil() as i64).max(done.saturating_add(1));
         let last = ((rj + span) * 10.0).floor() as i64;
         for b in first..=last {
             let rb = b as f64 / 10.0;
@@ -227,6 +338,7 @@ pub fn beam(set: &FlakeSet, az: f32, half: f32, r0: f64, i: f64) -> SnowOutcome 
                 best_bin = b;
             }
         }
+        done = done.max(last);
     }
     let d_max = best_bin as f64 / 10.0 - span / 2.0;
     if (d_max - r0).abs() < 0.2 {
@@ -235,6 +347,60 @@ pub fn beam(set: &FlakeSet, az: f32, half: f32, r0: f64, i: f64) -> SnowOutcome 
         SnowOutcome::Flake {
             range: d_max.max(0.1),
             intensity: best_p,
+        }
+    }
+}
+
+/// Fills `sc.cand` with the disks in front of the target that intersect the wedge, as angular
+/// intervals relative to `az` clipped to the wedge. The azimuth windows are those of a scan of
+/// every flake within `half + max_half_angle` (the window, then its wrapped-around parts below
+/// -pi and above pi); each tier reads only the part of them its widest flake can reach from. The
+/// scan order is kept in each entry so that equal ranges sort as a scan would list them.
+fn wedge_disks(sc: &mut BeamScratch, set: &FlakeSet, az: f32, half: f32, r0: f64) {
+    let pi = std::f32::consts::PI;
+    let reach = half + set.max_half_angle;
+    let cand = &mut sc.cand;
+    cand.clear();
+    // Windows: (lo, hi, shift, scan order of the window).
+    let mut windows = [(az - reach, az + reach, 0.0, 0u64); 3];
+    let mut n = 1;
+    if az - reach < -pi {
+        windows[n] = (az - reach + 2.0 * pi, pi, -2.0 * pi, 1);
+        n += 1;
+    }
+    if az + reach > pi {
+        windows[n] = (-pi, az + reach - 2.0 * pi, 2.0 * pi, 2);
+        n += 1;
+    }
+    for tier in &set.tiers {
+        if (tier.min_range as f64) >= r0 {
+            break; // this tier and the farther ones are behind the target
+        }
+        if tier.entries.is_empty() {
+            continue;
+        }
+        // Only flakes within this tier's reach of az can touch the wedge (with a margin, so
+        // that a rounding never leaves out a flake the test below would take).
+        let near = (half + tier.max_half) * (1.0 + 1e-5) + 1e-6;
+        for &(wlo, whi, shift, segment) in &windows[..n] {
+            let (lo, hi) = match segment {
+                0 => (wlo.max(az - near), whi.min(az + near)),
+                1 => (wlo.max(az - near + 2.0 * pi), whi),
+                _ => (wlo, whi.min(az + near - 2.0 * pi)),
+            };
+            for e in &tier.entries[tier.start(lo)..] {
+                if e.azimuth > hi {
+                    break;
+                }
+                if (e.range as f64) >= r0 {
+                    continue;
+                }
+                let c = e.azimuth + shift - az;
+                let (l, h) = ((c - e.half).max(-half), (c + e.half).min(half));
+                if l < h {
+                    cand.push((e.range, l, h, segment << 32 | e.k as u64));
+                }
+            }
         }
     }
 }
@@ -376,6 +542,7 @@ impl LidarPerturbation for HahnerSnow {
         let mut order: Vec<usize> = (0..self.sets.len()).collect();
         Rng::for_frame(self.seed, frame.seq, self.salt).shuffle(&mut order);
         let rings = points.ring.as_deref();
+        let mut scratch = BeamScratch::default();
         for i in 0..points.len() {
             let p = points.xyz(i);
             let r0 = points.range(i) as f64;
@@ -398,7 +565,7 @@ impl LidarPerturbation for HahnerSnow {
             let ring = rings.map_or(0, |r| r[i] as usize) % self.sets.len();
             let set = &self.sets[order[ring]];
             let az = p[1].atan2(p[0]);
-            match beam(set, az, self.half_divergence, r0, inten) {
+            match beam_with(&mut scratch, set, az, self.half_divergence, r0, inten) {
                 SnowOutcome::Flake { range, intensity } => {
                     let k = (range / r0) as f32;
                     plan.emit(
@@ -430,6 +597,72 @@ impl LidarPerturbation for HahnerSnow {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_bucket_table_finds_what_a_binary_search_finds() {
+        let mut rng = Rng::for_setup(3, 7);
+        let set = flake_set(&mut rng, HAHNER_SNOW[2].0, HAHNER_SNOW[2].1);
+        let tier = set.tiers.last().unwrap();
+        assert!(tier.entries.len() > 1000 && set.tiers.iter().all(|t| !t.entries.is_empty()));
+        let mut probes: Vec<f32> = (0..20_000).map(|_| rng.uniform(-3.2, 3.2) as f32).collect();
+        for e in tier.entries.iter().step_by(97) {
+            let x = e.azimuth;
+            probes.extend([x, x.next_up(), x.next_down()]);
+        }
+        for b in 0..tier.bucket.len() {
+            let e = bucket_edge(b, tier.bucket.len());
+            probes.extend([e, e.next_up(), e.next_down()]);
+        }
+        probes.extend([f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -7.0, 7.0]);
+        for t in &set.tiers {
+            for &lo in &probes {
+                assert_eq!(
+                    t.start(lo),
+                    t.entries.partition_point(|e| e.azimuth < lo),
+                    "{lo}"
+                );
+            }
+        }
+    }
+
+    /// The indexed wedge search gives what testing every flake gives.
+    #[test]
+    fn the_wedge_search_finds_every_flake_a_full_scan_finds() {
+        let mut rng = Rng::for_setup(5, 9);
+        let set = flake_set(&mut rng, HAHNER_SNOW[4].0, HAHNER_SNOW[4].1);
+        let mut sc = BeamScratch::default();
+        let pi = std::f32::consts::PI;
+        for k in 0..4000 {
+            let az = if k < 50 {
+                [pi - 1e-4, -pi + 1e-4][k % 2]
+            } else {
+                rng.uniform(-std::f64::consts::PI, std::f64::consts::PI) as f32
+            };
+            let (half, r0) = (1.5e-3, rng.uniform(1.0, 80.0));
+            wedge_disks(&mut sc, &set, az, half, r0);
+            let mut got: Vec<(f32, f32, f32)> = sc.cand.iter().map(|c| (c.0, c.1, c.2)).collect();
+            let mut want = Vec::new();
+            for f in &set.flakes {
+                let a = (f.radius / f.range).min(1.0).asin();
+                if (f.range as f64) >= r0 {
+                    continue;
+                }
+                for shift in [0.0, -2.0 * pi, 2.0 * pi] {
+                    let c = f.azimuth + shift - az;
+                    let (l, h) = ((c - a).max(-half), (c + a).min(half));
+                    if l < h {
+                        want.push((f.range, l, h));
+                    }
+                }
+            }
+            let key = |a: &(f32, f32, f32), b: &(f32, f32, f32)| {
+                a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1))
+            };
+            got.sort_by(key);
+            want.sort_by(key);
+            assert_eq!(got, want, "azimuth {az}");
+        }
+    }
 
     #[test]
     fn disk_sets_have_the_configured_occupancy() {
@@ -466,14 +699,11 @@ mod tests {
 
     #[test]
     fn a_flake_in_front_of_a_dark_far_target_wins() {
-        let set = FlakeSet {
-            flakes: vec![Flake {
-                azimuth: 0.0,
-                range: 5.0,
-                radius: 0.004,
-            }],
-            max_half_angle: (0.004f32 / 5.0).asin(),
-        };
+        let set = FlakeSet::new(vec![Flake {
+            azimuth: 0.0,
+            range: 5.0,
+            radius: 0.004,
+        }]);
         // A 3 mrad wedge at 5 m is 15 mm wide: the flake covers about half of it.
         match beam(&set, 0.0, 1.5e-3, 40.0, 10.0) {
             SnowOutcome::Flake { range, .. } => assert!((range - 5.0).abs() < 0.2, "{range}"),
