@@ -210,16 +210,9 @@ impl OwnedPayload {
     }
 }
 
-/// `CLOCK_MONOTONIC` in ns (the clock of the per-hop timestamps; shared by all processes).
-pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: clock_gettime writes the timespec we pass; CLOCK_MONOTONIC always exists on Linux.
-    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
-}
+/// `CLOCK_MONOTONIC` in ns, the clock of the per-hop timestamps (shared by all processes): the
+/// wire crate's, so bridge and daemon stamp hops with one function.
+pub use perturb_wire::monotonic_ns;
 
 /// Wall-clock time in ns since the Unix epoch.
 pub fn wall_ns() -> u64 {
