@@ -245,6 +245,30 @@ impl DataPtr for PyReadonlyArrayDyn<'_, u8> {
     }
 }
 
+/// Runs `f` with the GIL released. When the process may use one core (rayon's pool has one
+/// thread, as under `taskset -c 0`), `f` runs on the calling thread itself, made the only worker
+/// of a pool of its own, so the perturbation's parallel loops run inline instead of being handed
+/// to the pool's thread and waited for (a hand-off per loop, which costs the cheap perturbations
+/// a large share of their time). With more cores, `f` uses the global pool.
+fn detach<R: Send>(py: Python<'_>, f: impl FnOnce() -> R + Send) -> R {
+    py.detach(|| {
+        if rayon::current_num_threads() > 1 {
+            return f();
+        }
+        thread_local! {
+            static INLINE: Option<rayon::ThreadPool> = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .use_current_thread()
+                .build()
+                .ok();
+        }
+        INLINE.with(|pool| match pool {
+            Some(pool) => pool.install(f),
+            None => f(),
+        })
+    })
+}
+
 /// A pool of prepared perturber states shared by the threads that call one Python object.
 struct Pool<T> {
     free: Mutex<Vec<T>>,
@@ -312,14 +336,17 @@ impl CameraPerturber {
     ) -> PyResult<Bound<'py, PyArrayDyn<u8>>> {
         let input = image_in(image, format)?;
         let shape = input.array.shape().to_vec();
-        let out = PyArrayDyn::<u8>::zeros(py, IxDyn(&shape), false);
+        // Not zeroed: every perturbation writes every byte of its output (the camera contract),
+        // and zeroing a fresh frame costs as much as the cheapest perturbations.
+        // SAFETY: the array is fully written below before Python can see it.
+        let out = unsafe { PyArrayDyn::<u8>::new(py, IxDyn(&shape), false) };
         {
             let mut guard = out.try_readwrite().map_err(perr)?;
             let dst = guard.as_slice_mut().map_err(perr)?;
             let view = input.view()?;
             let l = input.layout;
             let spec = self.spec;
-            py.detach(|| {
+            detach(py, || {
                 let mut o = ImageViewMut::new(
                     dst,
                     l.width,
@@ -373,7 +400,7 @@ impl CameraPerturber {
         let data: &mut [u8] =
             unsafe { std::slice::from_raw_parts_mut(guard.as_array().as_ptr() as *mut u8, n) };
         let l = layout;
-        py.detach(|| {
+        detach(py, || {
             let mut scratch = Image::new(l.width, l.height, l.format);
             {
                 let view =
@@ -603,7 +630,7 @@ impl LidarPerturber {
             None => make().map_err(perr)?,
         };
         let result = (|| {
-            let bytes = py.detach(|| state.plan(&view, seq, None)).map_err(perr)?;
+            let bytes = detach(py, || state.plan(&view, seq, None)).map_err(perr)?;
             let rows = bytes / (4 * k);
             let out = PyArrayDyn::<f32>::zeros(py, IxDyn(&[rows, k]), false);
             {
@@ -615,7 +642,7 @@ impl LidarPerturber {
                     std::slice::from_raw_parts_mut(dst.as_mut_ptr() as *mut u8, dst.len() * 4)
                 };
                 let st = &state;
-                py.detach(|| st.write_planned(&view, dst)).map_err(perr)?;
+                detach(py, || st.write_planned(&view, dst)).map_err(perr)?;
             }
             Ok(out)
         })();
@@ -680,19 +707,18 @@ fn detect<'py>(
     let input = cloud_in(points)?;
     let layout = cloud_layout(&column_names(fields.as_deref(), input.k)?)?;
     let view = cloud_view(&layout, input.bytes(), input.n)?;
-    let (boxes, counts) = py
-        .detach(|| -> perturb_core::Result<_> {
-            let p = Points::extract(&view, &SensorModel::default(), false)?;
-            let config = if objects {
-                DetectorConfig::objects()
-            } else {
-                DetectorConfig::default()
-            };
-            let boxes = Detector::new(config).detect(&p);
-            let counts = points_in_boxes(&p, &boxes);
-            Ok((boxes, counts))
-        })
-        .map_err(perr)?;
+    let (boxes, counts) = detach(py, || -> perturb_core::Result<_> {
+        let p = Points::extract(&view, &SensorModel::default(), false)?;
+        let config = if objects {
+            DetectorConfig::objects()
+        } else {
+            DetectorConfig::default()
+        };
+        let boxes = Detector::new(config).detect(&p);
+        let counts = points_in_boxes(&p, &boxes);
+        Ok((boxes, counts))
+    })
+    .map_err(perr)?;
     let out = PyList::empty(py);
     for (b, n) in boxes.iter().zip(counts) {
         let d = PyDict::new(py);

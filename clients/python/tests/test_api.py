@@ -133,3 +133,39 @@ def test_threads_share_a_perturber_and_get_the_sequential_bytes(small):
         assert np.array_equal(g, expected[k])
     for k, g in zip(jobs, got_l):
         assert g.tobytes() == expected_l[k].tobytes()
+
+
+_ONE_CORE = r"""
+import concurrent.futures, os, sys
+import numpy as np
+os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+import perturb  # rayon sizes its pool now: one thread
+frame = np.load(sys.argv[1])
+ids = [e["id"] for e in perturb.catalogue() if e["modality"] == "camera"]
+def run(i):
+    return perturb.CameraPerturber(i, 1, seed=5)(frame, 3)
+with concurrent.futures.ThreadPoolExecutor(3) as pool:  # each thread its own inline pool
+    outs = list(pool.map(run, ids))
+np.savez(sys.argv[2], **dict(zip(ids, outs)))
+"""
+
+
+def test_on_one_core_the_work_runs_inline_with_the_same_bytes(tmp_path):
+    """With one core allowed, a call runs the perturbation's parallel loops on the calling
+    thread (no hand-off to rayon's pool): the bytes are those of the multi-core path."""
+    import subprocess
+    import sys
+
+    rng = np.random.default_rng(9)
+    frame = rng.integers(0, 256, size=(160, 200, 3), dtype=np.uint8)
+    np.save(tmp_path / "frame.npy", frame)
+    subprocess.run(
+        [sys.executable, "-c", _ONE_CORE, str(tmp_path / "frame.npy"), str(tmp_path / "out.npz")],
+        check=True,
+    )
+    got = np.load(tmp_path / "out.npz")
+    ids = [e["id"] for e in perturb.catalogue() if e["modality"] == "camera"]
+    assert sorted(got.files) == sorted(ids)
+    for i in ids:
+        want = perturb.CameraPerturber(i, 1, seed=5)(frame, 3)
+        assert np.array_equal(got[i], want), i
