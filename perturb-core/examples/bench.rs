@@ -1,4 +1,4 @@
-//! Times the implemented perturbations on a real KITTI frame or scan, single-threaded.
+//! Times the perturbations on a real KITTI frame or scan, single-threaded.
 //!
 //! ```text
 //! cargo run --release -p perturb-core --example bench -- camera 1920 1208 [ID ...]
@@ -35,7 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let ids = &args[3.min(args.len())..];
         let frame = picture::decode(&std::fs::read(data.join("kitti/image_2/000000.png"))?)?;
         let frame = resize_bilinear(&frame.view(), w, h);
-        for e in of_modality(Modality::Camera).filter(|e| e.is_implemented()) {
+        for e in of_modality(Modality::Camera) {
             if !ids.is_empty() && !ids.iter().any(|i| i.eq_ignore_ascii_case(e.id)) {
                 continue;
             }
@@ -47,7 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let ids = &args[1.min(args.len())..];
         let scan = kitti::decode_kitti(&std::fs::read(data.join("kitti/velodyne/000000.bin"))?)?;
         let sensor = SensorModel::hdl64e();
-        for e in of_modality(Modality::Lidar).filter(|e| e.is_implemented()) {
+        for e in of_modality(Modality::Lidar) {
             if !ids.is_empty() && !ids.iter().any(|i| i.eq_ignore_ascii_case(e.id)) {
                 continue;
             }

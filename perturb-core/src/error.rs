@@ -31,14 +31,6 @@ pub enum Error {
         /// What it was given.
         found: &'static str,
     },
-    /// The perturbation is in the catalogue but this build cannot run it yet.
-    #[error("{id} ({name}) is in the catalogue but not implemented in this build")]
-    NotImplemented {
-        /// The perturbation ID.
-        id: &'static str,
-        /// Its name.
-        name: &'static str,
-    },
     /// An image buffer does not match the geometry it claims.
     #[error("invalid image: {reason}")]
     InvalidImage {

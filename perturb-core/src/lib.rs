@@ -29,3 +29,5 @@ pub mod viz;
 
 pub use error::{Error, Result};
 pub use lidar::detector;
+pub use perturber::{CameraPerturber, LidarPerturber, Spec};
+pub use registry::{CATALOGUE, Modality, find};

@@ -81,7 +81,7 @@ impl std::fmt::Debug for CameraPerturber {
 }
 
 impl CameraPerturber {
-    /// Validates the ID (must be a camera perturbation), the severity and that it is implemented.
+    /// Validates the ID (must be a camera perturbation) and the severity.
     pub fn new(id: &str, severity: u8, seed: u64) -> Result<Self> {
         Self::from_spec(Spec::new(id, severity, seed)?)
     }
@@ -91,10 +91,6 @@ impl CameraPerturber {
         match spec.entry.build {
             Builder::Camera(_) => Ok(CameraPerturber { spec, built: None }),
             Builder::Lidar(_) => Err(wrong_modality(spec.entry, "image")),
-            Builder::Missing => Err(Error::NotImplemented {
-                id: spec.entry.id,
-                name: spec.entry.name,
-            }),
         }
     }
 
@@ -195,12 +191,6 @@ impl LidarPerturber {
                 sensor: sensor.clone(),
             })?,
             Builder::Camera(_) => return Err(wrong_modality(spec.entry, "point cloud")),
-            Builder::Missing => {
-                return Err(Error::NotImplemented {
-                    id: spec.entry.id,
-                    name: spec.entry.name,
-                });
-            }
         };
         let detector = perturbation
             .needs()

@@ -72,8 +72,6 @@ pub enum Builder {
     Camera(CameraBuilder),
     /// A LiDAR perturbation.
     Lidar(LidarBuilder),
-    /// Listed in the catalogue, not implemented in this build.
-    Missing,
 }
 
 /// One perturbation of the catalogue.
@@ -127,11 +125,6 @@ impl Entry {
                 max: self.max_severity(),
             })
         }
-    }
-
-    /// True if this build can run the perturbation.
-    pub fn is_implemented(&self) -> bool {
-        !matches!(self.build, Builder::Missing)
     }
 }
 
@@ -283,7 +276,6 @@ mod tests {
             };
             assert!(e.id.starts_with(prefix), "{}", e.id);
             assert!(!e.description.is_empty() && !e.name.contains(' '));
-            assert!(e.is_implemented(), "{} is not implemented", e.id);
             match (e.modality, e.build) {
                 (Modality::Camera, Builder::Lidar(_)) | (Modality::Lidar, Builder::Camera(_)) => {
                     panic!("{} has a builder of the other modality", e.id)

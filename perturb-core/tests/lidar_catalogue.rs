@@ -1,4 +1,4 @@
-//! Properties every implemented LiDAR perturbation must have, at every severity: determinism,
+//! Properties every LiDAR perturbation must have, at every severity: determinism,
 //! layout preserved in odd layouts (unaligned, big-endian, float64), untouched fields passed through,
 //! empty and single-point clouds, and a change on a real KITTI scan.
 
@@ -7,15 +7,12 @@ mod common;
 use perturb_core::cloud::{Cloud, CloudView, Datatype, PointField, PointLayout};
 use perturb_core::lidar::Box3;
 use perturb_core::perturber::LidarPerturber;
-use perturb_core::registry::{Modality, of_modality};
+use perturb_core::registry::{Entry, Modality};
+
+/// The modality whose catalogue entries this file checks.
+const MODALITY: Modality = Modality::Lidar;
 use perturb_core::rng::Rng;
 use perturb_core::sensors::SensorModel;
-
-fn implemented() -> Vec<&'static perturb_core::registry::Entry> {
-    of_modality(Modality::Lidar)
-        .filter(|e| e.is_implemented())
-        .collect()
-}
 
 /// A point layout as awkward as real drivers make them: big-endian, unaligned, a float64 z, a
 /// uint16 ring and a float64 time at offset 18 of a 26-byte point... plus a uint8 intensity.
@@ -116,8 +113,7 @@ fn apply(p: &mut LidarPerturber, c: &CloudView<'_>, seq: u64) -> Cloud {
         .unwrap_or_else(|e| panic!("{}: {e}", p.spec().entry.id))
 }
 
-#[test]
-fn deterministic_layout_preserving_and_passing_fields_through() {
+fn deterministic_layout_preserving_and_passing_fields_through(e: &Entry) {
     let layout = odd_layout();
     let cloud = synthetic_scan(&layout, 360);
     let view = cloud.view();
@@ -131,73 +127,136 @@ fn deterministic_layout_preserving_and_passing_fields_through() {
         .unwrap();
     let tag = layout.reader("tag").unwrap();
     let time = layout.reader("time").unwrap();
-    for e in implemented() {
-        for s in e.severities() {
-            let mut p = LidarPerturber::new(e.id, s, 99, SensorModel::vlp32c()).unwrap();
-            let a = one.install(|| apply(&mut p, &view, 4));
-            let b = two.install(|| apply(&mut p, &view, 4));
-            assert_eq!(
-                a, b,
-                "{} s{s}: output depends on thread count or call history",
-                e.id
-            );
-            assert_eq!(*a.layout, layout, "{} s{s}: layout changed", e.id);
+    for s in e.severities() {
+        let mut p = LidarPerturber::new(e.id, s, 99, SensorModel::vlp32c()).unwrap();
+        let a = one.install(|| apply(&mut p, &view, 4));
+        let b = two.install(|| apply(&mut p, &view, 4));
+        assert_eq!(
+            a, b,
+            "{} s{s}: output depends on thread count or call history",
+            e.id
+        );
+        assert_eq!(*a.layout, layout, "{} s{s}: layout changed", e.id);
+        assert!(
+            p.max_output_bytes(&view) >= a.data.len(),
+            "{} s{s}: max_output_bytes is not an upper bound",
+            e.id
+        );
+        // Every output point's untouched fields come from one input point.
+        for k in 0..a.len() {
+            let q = a.view().point(k);
+            let i = tag.read_f64(q) as usize;
+            assert!(i < cloud.len(), "{} s{s}: tag field corrupted", e.id);
+            let t = time.read_f64(q);
             assert!(
-                p.max_output_bytes(&view) >= a.data.len(),
-                "{} s{s}: max_output_bytes is not an upper bound",
+                (t - i as f64 * 1e-6).abs() < 1e-12,
+                "{} s{s}: time field does not travel with its point",
                 e.id
             );
-            // Every output point's untouched fields come from one input point.
-            for k in 0..a.len() {
-                let q = a.view().point(k);
-                let i = tag.read_f64(q) as usize;
-                assert!(i < cloud.len(), "{} s{s}: tag field corrupted", e.id);
-                let t = time.read_f64(q);
-                assert!(
-                    (t - i as f64 * 1e-6).abs() < 1e-12,
-                    "{} s{s}: time field does not travel with its point",
-                    e.id
-                );
-            }
         }
     }
 }
 
-#[test]
-fn empty_and_single_point_clouds() {
+fn empty_and_single_point_clouds(e: &Entry) {
     let layout = odd_layout();
     let empty = Cloud::zeroed(std::sync::Arc::new(layout.clone()), 0);
     let single = Cloud::from_xyzi(&layout, &[[5.0, 1.0, -1.0, 40.0]]);
-    for e in implemented() {
-        for s in e.severities() {
-            let mut p = LidarPerturber::new(e.id, s, 1, SensorModel::vlp32c()).unwrap();
-            let out = apply(&mut p, &empty.view(), 0);
-            assert_eq!(*out.layout, layout);
-            let out = apply(&mut p, &single.view(), 0);
-            assert!(
-                out.len() <= p.max_output_bytes(&single.view()) / 26,
-                "{} s{s}",
-                e.id
-            );
-        }
+    for s in e.severities() {
+        let mut p = LidarPerturber::new(e.id, s, 1, SensorModel::vlp32c()).unwrap();
+        let out = apply(&mut p, &empty.view(), 0);
+        assert_eq!(*out.layout, layout);
+        let out = apply(&mut p, &single.view(), 0);
+        assert!(
+            out.len() <= p.max_output_bytes(&single.view()) / 26,
+            "{} s{s}",
+            e.id
+        );
     }
 }
 
-#[test]
-fn changes_a_real_kitti_scan_at_every_severity() {
+fn changes_a_real_kitti_scan_at_every_severity(e: &Entry) {
     let Some(scan) = common::kitti_scan("changes_a_real_kitti_scan_at_every_severity", 0) else {
         return;
     };
     let view = scan.view();
     let sensor = SensorModel::hdl64e();
-    for e in implemented() {
-        for s in e.severities() {
-            let mut p = LidarPerturber::new(e.id, s, 7, sensor.clone()).unwrap();
-            let boxes = boxes();
-            // Some perturbations act on a random subset of clouds (L-F4): one of 16 frames must change.
-            let changed = (0..16)
-                .any(|seq| p.apply_owned(&view, seq, Some(&boxes)).unwrap().data != scan.data);
-            assert!(changed, "{} s{s}: the scan is unchanged in 16 frames", e.id);
-        }
+    for s in e.severities() {
+        let mut p = LidarPerturber::new(e.id, s, 7, sensor.clone()).unwrap();
+        let boxes = boxes();
+        // Some perturbations act on a random subset of clouds (L-F4): one of 16 frames must change.
+        let changed =
+            (0..16).any(|seq| p.apply_owned(&view, seq, Some(&boxes)).unwrap().data != scan.data);
+        assert!(changed, "{} s{s}: the scan is unchanged in 16 frames", e.id);
     }
+}
+
+/// One module per catalogue entry, named after its ID (`l_a1`), holding a test per
+/// property: `cargo test -p perturb-core l_a1` checks one perturbation, and a failure in one
+/// entry does not hide the others.
+macro_rules! per_entry {
+    ($($module:ident => $id:literal),* $(,)?) => {
+        $(
+            mod $module {
+                fn entry() -> &'static perturb_core::registry::Entry {
+                    perturb_core::find($id).expect("in the catalogue")
+                }
+                #[test]
+                fn deterministic_layout_preserving_and_passing_fields_through() {
+                    super::deterministic_layout_preserving_and_passing_fields_through(entry());
+                }
+                #[test]
+                fn empty_and_single_point_clouds() {
+                    super::empty_and_single_point_clouds(entry());
+                }
+                #[test]
+                fn changes_a_real_kitti_scan_at_every_severity() {
+                    super::changes_a_real_kitti_scan_at_every_severity(entry());
+                }
+            }
+        )*
+
+        /// The list below is the catalogue: a new perturbation needs its line here.
+        #[test]
+        fn every_entry_has_its_tests() {
+            let listed = [$($id),*];
+            let catalogue: Vec<&str> = perturb_core::registry::of_modality(MODALITY)
+                .map(|e| e.id)
+                .collect();
+            assert_eq!(listed.to_vec(), catalogue);
+        }
+    };
+}
+
+per_entry! {
+    l_a1 => "L-A1",
+    l_a2 => "L-A2",
+    l_a3 => "L-A3",
+    l_a4 => "L-A4",
+    l_a5 => "L-A5",
+    l_a6 => "L-A6",
+    l_a7 => "L-A7",
+    l_a8 => "L-A8",
+    l_a9 => "L-A9",
+    l_a10 => "L-A10",
+    l_b1 => "L-B1",
+    l_b2 => "L-B2",
+    l_b3 => "L-B3",
+    l_b4 => "L-B4",
+    l_b5 => "L-B5",
+    l_b6 => "L-B6",
+    l_c1 => "L-C1",
+    l_c2 => "L-C2",
+    l_c3 => "L-C3",
+    l_d1 => "L-D1",
+    l_d2 => "L-D2",
+    l_d3 => "L-D3",
+    l_d4 => "L-D4",
+    l_d5 => "L-D5",
+    l_e1 => "L-E1",
+    l_e2 => "L-E2",
+    l_e3 => "L-E3",
+    l_f1 => "L-F1",
+    l_f2 => "L-F2",
+    l_f3 => "L-F3",
+    l_f4 => "L-F4",
 }

@@ -134,9 +134,7 @@ pub fn run(a: Args) -> Result<()> {
     let selected = |id: &str| a.ids.is_empty() || a.ids.iter().any(|i| i.eq_ignore_ascii_case(id));
     let format = if a.json { Format::Json } else { a.format };
     if let Some(bag) = &a.hil {
-        let entries: Vec<_> = of_modality(a.modality)
-            .filter(|e| e.is_implemented() && selected(e.id))
-            .collect();
+        let entries: Vec<_> = of_modality(a.modality).filter(|e| selected(e.id)).collect();
         if entries.is_empty() {
             bail!("no perturbation selected");
         }
@@ -167,8 +165,7 @@ pub fn run(a: Args) -> Result<()> {
                 a.height,
                 a.threads
             );
-            for e in of_modality(Modality::Camera).filter(|e| e.is_implemented() && selected(e.id))
-            {
+            for e in of_modality(Modality::Camera).filter(|e| selected(e.id)) {
                 for s in e.severities() {
                     rows.push(
                         pool.install(|| time_camera(e, s, 1, &frame.view(), a.frames))
@@ -191,7 +188,7 @@ pub fn run(a: Args) -> Result<()> {
                 cloud.len(),
                 a.threads
             );
-            for e in of_modality(Modality::Lidar).filter(|e| e.is_implemented() && selected(e.id)) {
+            for e in of_modality(Modality::Lidar).filter(|e| selected(e.id)) {
                 for s in e.severities() {
                     rows.push(
                         pool.install(|| time_lidar(e, s, 1, &sensor, &cloud.view(), a.frames))

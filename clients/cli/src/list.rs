@@ -5,7 +5,7 @@ use perturb_core::registry::{CATALOGUE, Modality};
 /// Arguments of `perturb list`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Print a JSON array (id, name, modality, family, severities, description, reference, implemented).
+    /// Print a JSON array (id, name, modality, family, severities, description, reference).
     #[arg(long)]
     json: bool,
     /// Only this modality: camera or lidar.
@@ -22,7 +22,6 @@ struct Row {
     severities: Vec<u8>,
     description: &'static str,
     reference: &'static str,
-    implemented: bool,
 }
 
 /// Prints the catalogue.
@@ -38,7 +37,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             severities: e.severities().collect(),
             description: e.description,
             reference: e.reference,
-            implemented: e.is_implemented(),
         })
         .collect();
     if args.json {
@@ -51,20 +49,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     for r in &rows {
         let sev = format!("1-{}", r.severities.len());
-        let mark = if r.implemented {
-            ""
-        } else {
-            "  [not in this build]"
-        };
         println!(
-            "{:<6} {:<24} {:<7} {:<11} {:<5} {}{}",
+            "{:<6} {:<24} {:<7} {:<11} {:<5} {}",
             r.id,
             r.name,
             r.modality.as_str(),
             r.family,
             sev,
-            r.description,
-            mark
+            r.description
         );
     }
     Ok(())

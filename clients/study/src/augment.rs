@@ -76,7 +76,7 @@ pub fn run(a: &AugmentOptions, progress: &dyn Progress) -> Result<AugmentOutcome
         modality: (a.ids.is_empty() && a.families.is_empty()).then_some(modality),
         severities: a.severities.clone(),
     };
-    let sets = select(&sel, &[modality], progress)?;
+    let sets = select(&sel, &[modality])?;
     let sensor = if modality == Modality::Lidar {
         let kind = perturb_core::formats::FileKind::from_path(&files[0]).ok();
         let s = sensor_for(

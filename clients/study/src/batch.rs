@@ -48,13 +48,8 @@ impl Set {
     }
 }
 
-/// The sets selected, restricted to the modalities of the dataset. Perturbations this build
-/// does not implement are skipped with a note.
-pub fn select(
-    sel: &Selection,
-    modalities: &[Modality],
-    progress: &dyn Progress,
-) -> Result<Vec<Set>> {
+/// The sets selected, restricted to the modalities of the dataset.
+pub fn select(sel: &Selection, modalities: &[Modality]) -> Result<Vec<Set>> {
     let mut entries: Vec<&'static Entry> = Vec::new();
     for id in &sel.ids {
         entries.push(find(id)?);
@@ -92,13 +87,6 @@ pub fn select(
                     e.id, e.modality, e.modality
                 )));
             }
-            continue;
-        }
-        if !e.is_implemented() {
-            progress.note(&format!(
-                "skipping {} ({}): not implemented in this build",
-                e.id, e.name
-            ));
             continue;
         }
         let sevs: Vec<u8> = if sel.severities.is_empty() {
@@ -246,7 +234,7 @@ pub fn plan(opts: &BatchOptions, progress: &dyn Progress) -> Result<Planned> {
         Dataset::Files { modality, .. } => vec![*modality],
         Dataset::Bag(_) => vec![Modality::Camera, Modality::Lidar],
     };
-    let mut sets = select(&opts.selection, &modalities, progress)?;
+    let mut sets = select(&opts.selection, &modalities)?;
     if let Some(shard) = opts.shard {
         sets = sets
             .into_iter()
