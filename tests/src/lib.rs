@@ -278,19 +278,7 @@ impl Drop for Daemon {
 
 /// SIGINT, then SIGKILL after 10 s.
 fn interrupt(c: &mut Child) {
-    // SAFETY: kill(2) on our own child's pid.
-    unsafe {
-        libc::kill(c.id() as i32, libc::SIGINT);
-    }
-    let start = Instant::now();
-    while start.elapsed() < Duration::from_secs(10) {
-        if let Ok(Some(_)) = c.try_wait() {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let _ = c.kill();
-    let _ = c.wait();
+    let _ = perturb_wire::process::interrupt(c, Duration::from_secs(10));
 }
 
 /// A running sink.

@@ -28,18 +28,7 @@ use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 fn interrupt(c: &mut Child) -> bool {
-    // SAFETY: kill(2) on our own child.
-    unsafe { libc::kill(c.id() as i32, libc::SIGINT) };
-    let t = Instant::now();
-    while t.elapsed() < Duration::from_secs(15) {
-        if let Ok(Some(s)) = c.try_wait() {
-            return s.success();
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let _ = c.kill();
-    let _ = c.wait();
-    false
+    perturb_wire::process::interrupt(c, Duration::from_secs(15)).is_some_and(|s| s.success())
 }
 
 fn start_bridge(ns: &Namespace, master: &Ros1Master, cfg: &Path, log: &str) -> Child {

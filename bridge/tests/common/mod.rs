@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// True when missing oracles must fail the test (CI sets PERTURB_REQUIRE_ORACLES=1).
 pub fn required() -> bool {
@@ -76,18 +76,7 @@ pub fn shared_data(sub: &str) -> Option<PathBuf> {
 
 /// Sends SIGINT and waits up to `timeout`; kills if it does not stop.
 pub fn interrupt(child: &mut Child, timeout: Duration) -> Option<std::process::ExitStatus> {
-    // SAFETY: signalling our own child process by pid.
-    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-    let t = Instant::now();
-    while t.elapsed() < timeout {
-        if let Ok(Some(s)) = child.try_wait() {
-            return Some(s);
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let _ = child.kill();
-    let _ = child.wait();
-    None
+    perturb_wire::process::interrupt(child, timeout)
 }
 
 /// A DDS domain id private to this test process (keeps parallel tests apart).

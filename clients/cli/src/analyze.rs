@@ -1,7 +1,7 @@
 //! `perturb analyze`: the closed-loop half of the study from recorded runs; `perturb analyze
 //! transfer` (offline vs closed-loop) and `perturb analyze compare` (fine-tuned vs baseline).
 
-use crate::metrics::Format;
+use crate::format::Format;
 use anyhow::{Context, Result, bail};
 use perturb_study::analyze::{
     Aggregate, AnalyzeConfig, JitterUnit, ObjectsConfig, ObjectsFrame, TopicField,

@@ -1,25 +1,12 @@
 //! `perturb bench`: latency of every perturbation at every severity on a real frame or scan.
 
+use crate::format::Format;
 use anyhow::{Context, Result, bail};
 use perturb_core::bench::{Timing, time_camera, time_lidar};
 use perturb_core::image::resize_bilinear;
 use perturb_core::registry::{Modality, of_modality};
 use perturb_study::files::{Loaded, describe_sensor, load, sensor_for};
 use std::path::PathBuf;
-
-/// Output format of the report.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
-pub enum Format {
-    /// An aligned table for the terminal.
-    #[default]
-    Table,
-    /// A JSON array, one object per perturbation and severity.
-    Json,
-    /// A markdown table.
-    Markdown,
-    /// CSV, one row per perturbation and severity.
-    Csv,
-}
 
 /// Arguments of `perturb bench`.
 #[derive(clap::Args)]

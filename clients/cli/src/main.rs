@@ -12,6 +12,7 @@ mod ctl;
 mod demo;
 mod demo_offline;
 mod detect;
+mod format;
 mod gallery;
 mod hil;
 mod info;

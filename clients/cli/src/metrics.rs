@@ -1,33 +1,9 @@
 //! `perturb metrics`: the study's tables from batch outputs and model predictions.
 
+use crate::format::Format;
 use crate::progress::{Bar, Notes};
 use anyhow::{Result, bail};
 use std::path::PathBuf;
-
-/// Output format of a metrics table.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
-pub enum Format {
-    /// Aligned terminal table.
-    #[default]
-    Table,
-    /// Markdown table.
-    Markdown,
-    /// CSV, one row per perturbation and severity.
-    Csv,
-    /// JSON.
-    Json,
-}
-
-impl From<Format> for perturb_study::Format {
-    fn from(f: Format) -> Self {
-        match f {
-            Format::Table => perturb_study::Format::Table,
-            Format::Markdown => perturb_study::Format::Markdown,
-            Format::Csv => perturb_study::Format::Csv,
-            Format::Json => perturb_study::Format::Json,
-        }
-    }
-}
 
 /// Arguments of `perturb metrics`.
 #[derive(clap::Args)]

@@ -347,28 +347,17 @@ impl Proc {
 
     /// SIGINT, then waits up to `grace` before SIGKILL.
     fn stop(&mut self, grace: Duration) -> Result<()> {
-        // SAFETY: kill(2) on our own child's pid.
-        unsafe {
-            libc::kill(self.child.id() as i32, libc::SIGINT);
-        }
-        let start = Instant::now();
-        loop {
-            if let Some(st) = self.child.try_wait()? {
-                if !st.success() {
-                    eprintln!(
-                        "warning: {} exited with {st}; see {}",
-                        self.name,
-                        self.log.display()
-                    );
-                }
-                return Ok(());
+        match perturb_wire::process::interrupt(&mut self.child, grace) {
+            Some(st) if !st.success() => {
+                eprintln!(
+                    "warning: {} exited with {st}; see {}",
+                    self.name,
+                    self.log.display()
+                );
+                Ok(())
             }
-            if start.elapsed() > grace {
-                let _ = self.child.kill();
-                let _ = self.child.wait();
-                bail!("{} did not stop within {grace:?}; killed", self.name);
-            }
-            std::thread::sleep(Duration::from_millis(20));
+            Some(_) => Ok(()),
+            None => bail!("{} did not stop within {grace:?}; killed", self.name),
         }
     }
 }

@@ -42,6 +42,7 @@
 pub mod control;
 mod error;
 pub mod header;
+pub mod process;
 mod publisher;
 mod subscriber;
 mod transport;
