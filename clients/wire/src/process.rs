@@ -48,9 +48,18 @@ mod tests {
         let st = interrupt(&mut sleeper, Duration::from_secs(5)).expect("sleep dies on SIGINT");
         assert!(!st.success());
         let mut stubborn = Command::new("sh")
-            .args(["-c", "trap '' INT; sleep 30"])
+            .args(["-c", "trap '' INT; echo ready; exec sleep 30"])
+            .stdout(std::process::Stdio::piped())
             .spawn()
             .unwrap();
+        // Only once the shell ignores SIGINT (the ignored disposition survives the exec).
+        let mut line = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(stubborn.stdout.take().unwrap()),
+            &mut line,
+        )
+        .unwrap();
+        assert_eq!(line.trim(), "ready");
         let t = Instant::now();
         assert_eq!(interrupt(&mut stubborn, Duration::from_millis(300)), None);
         assert!(t.elapsed() < Duration::from_secs(5));
