@@ -192,22 +192,22 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("C-C5", "brightness_decrease", Camera, "weather", Builder::Camera(camera::weather::BRIGHTNESS_DOWN), "mirror of increase_brightness", "Under-exposure: HSV value scaled down"),
     entry!("C-C6", "contrast", Camera, "weather", Builder::Camera(camera::weather::CONTRAST), "PerturbationDrive contrast", "Contrast stretched around mid-grey"),
     entry!("C-C7", "rain", Camera, "weather", Builder::Camera(camera::weather::RAIN), "PerturbationDrive dynamic_rain_filter", "Falling rain streaks (procedural, animated)"),
-    entry!("C-C8", "raindrops", Camera, "weather", Builder::Camera(camera::weather::RAINDROPS_BUILDER), "PerturbationDrive effects_rain_dynamic", "Refracting water drops on the windshield (animated)"),
+    entry!("C-C8", "raindrops", Camera, "weather", Builder::Camera(camera::weather::RAINDROPS), "PerturbationDrive effects_rain_dynamic", "Refracting water drops on the windshield (animated)"),
     entry!("C-C9", "lightning", Camera, "weather", Builder::Camera(camera::weather::LIGHTNING), "PerturbationDrive dynamic_lightning_filter", "Lightning bolts and flashes (procedural, animated)"),
     entry!("C-C10", "smoke", Camera, "weather", Builder::Camera(camera::weather::SMOKE), "PerturbationDrive dynamic_smoke_filter", "Drifting smoke clouds (procedural, animated)"),
     entry!("C-C11", "sun_glare", Camera, "weather", Builder::Camera(camera::weather::SUN_GLARE), "PerturbationDrive dynamic_sun_filter", "Sun glare with streak and lens ghosts (procedural, animated)"),
-    entry!("C-C12", "snowflakes", Camera, "weather", Builder::Camera(camera::weather::SNOWFLAKES_BUILDER), "PerturbationDrive effects_snowflake_dynamic", "Snowflakes rushing past while driving (particles, animated)"),
+    entry!("C-C12", "snowflakes", Camera, "weather", Builder::Camera(camera::weather::SNOWFLAKES), "PerturbationDrive effects_snowflake_dynamic", "Snowflakes rushing past while driving (particles, animated)"),
     // ---- Camera: distortion
-    entry!("C-D1", "elastic", Camera, "distortion", Builder::Camera(camera::distortion::ELASTIC_BUILDER), "PerturbationDrive elastic", "Elastic pixel jitter from a smoothed random displacement field"),
+    entry!("C-D1", "elastic", Camera, "distortion", Builder::Camera(camera::distortion::ELASTIC), "PerturbationDrive elastic", "Elastic pixel jitter from a smoothed random displacement field"),
     entry!("C-D2", "pixelate", Camera, "distortion", Builder::Camera(camera::distortion::PIXELATE), "PerturbationDrive pixelate", "Low-resolution blocks: downscale then nearest upscale"),
     entry!("C-D3", "sample_pairing", Camera, "distortion", Builder::Camera(camera::distortion::SAMPLE_PAIRING), "PerturbationDrive sample_pairing_filter", "Blend with an enlarged random crop of the same frame"),
-    entry!("C-D4", "sharpen", Camera, "distortion", Builder::Camera(camera::distortion::SHARPEN_BUILDER), "PerturbationDrive sharpen_filter", "Over-sharpening with an unnormalised Laplacian kernel"),
+    entry!("C-D4", "sharpen", Camera, "distortion", Builder::Camera(camera::distortion::SHARPEN), "PerturbationDrive sharpen_filter", "Over-sharpening with an unnormalised Laplacian kernel"),
     // ---- Camera: patterns
-    entry!("C-E1", "splatter", Camera, "pattern", Builder::Camera(camera::pattern::SPLATTER_BUILDER), "PerturbationDrive splatter_mapping", "Black blobs of dirt on the lens"),
-    entry!("C-E2", "dotted_lines", Camera, "pattern", Builder::Camera(camera::pattern::DOTTED_LINES_BUILDER), "PerturbationDrive dotted_lines_mapping", "Dotted black lines across the image"),
-    entry!("C-E3", "zigzag", Camera, "pattern", Builder::Camera(camera::pattern::ZIGZAG_BUILDER), "PerturbationDrive zigzag_mapping", "Zig-zag black scratches"),
-    entry!("C-E4", "canny_edges", Camera, "pattern", Builder::Camera(camera::pattern::CANNY_BUILDER), "PerturbationDrive canny_edges_mapping", "Canny edge overlay on a dimmed image"),
-    entry!("C-E5", "cutout", Camera, "pattern", Builder::Camera(camera::pattern::CUTOUT_BUILDER), "PerturbationDrive cutout_filter", "Black rectangles occluding parts of the image"),
+    entry!("C-E1", "splatter", Camera, "pattern", Builder::Camera(camera::pattern::SPLATTER), "PerturbationDrive splatter_mapping", "Black blobs of dirt on the lens"),
+    entry!("C-E2", "dotted_lines", Camera, "pattern", Builder::Camera(camera::pattern::DOTTED_LINES), "PerturbationDrive dotted_lines_mapping", "Dotted black lines across the image"),
+    entry!("C-E3", "zigzag", Camera, "pattern", Builder::Camera(camera::pattern::ZIGZAG), "PerturbationDrive zigzag_mapping", "Zig-zag black scratches"),
+    entry!("C-E4", "canny_edges", Camera, "pattern", Builder::Camera(camera::pattern::CANNY), "PerturbationDrive canny_edges_mapping", "Canny edge overlay on a dimmed image"),
+    entry!("C-E5", "cutout", Camera, "pattern", Builder::Camera(camera::pattern::CUTOUT), "PerturbationDrive cutout_filter", "Black rectangles occluding parts of the image"),
     entry!("C-E6", "object_overlay", Camera, "pattern", Builder::Camera(camera::pattern::OBJECT_OVERLAY), "PerturbationDrive object_overlay", "An opaque object (sticker, sign) covering the centre"),
     // ---- Camera: colour and tone
     entry!("C-F1", "false_color", Camera, "color", Builder::Camera(camera::color::FALSE_COLOR), "PerturbationDrive false_color_filter", "Channel swaps, inversion and channel mixing"),
@@ -254,7 +254,7 @@ pub static CATALOGUE: &[Entry] = &[
     entry!("L-F1", "motion_blur", Lidar, "motion", Builder::Lidar(lidar::motion::MOTION_BLUR), "MultiCorrupt pts_motion", "Ego-motion smear: a global shift plus per-point jitter"),
     entry!("L-F2", "moving_object", Lidar, "motion", Builder::Lidar(lidar::motion::MOVING_OBJECT), "3D-Corruptions-AD moving_noise_bbox", "Detected objects smeared as if moving during the sweep"),
     entry!("L-F3", "ghost_points", Lidar, "motion", Builder::Lidar(lidar::motion::GHOST_POINTS), "project's own", "Displaced, dimmer copies of the points of detected objects"),
-    entry!("L-F4", "spatial_misalignment", Lidar, "motion", Builder::Lidar(lidar::motion::MISALIGNMENT_BUILDER), "MultiCorrupt transform_points", "Extrinsic calibration error: a rigid rotation and shift"),
+    entry!("L-F4", "spatial_misalignment", Lidar, "motion", Builder::Lidar(lidar::motion::MISALIGNMENT), "MultiCorrupt transform_points", "Extrinsic calibration error: a rigid rotation and shift"),
 ];
 
 #[cfg(test)]

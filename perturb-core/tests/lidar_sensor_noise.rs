@@ -5,7 +5,7 @@ mod common;
 
 use perturb_core::cloud::{Cloud, PointLayout};
 use perturb_core::lidar::Points;
-use perturb_core::lidar::motion::MISALIGNMENT;
+use perturb_core::lidar::motion::MISALIGNMENT_LEVELS;
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::sensors::SensorModel;
 
@@ -212,7 +212,7 @@ fn misalignment_is_the_reference_transform_on_a_fraction_of_the_clouds() {
     let c = grid(1_000);
     let s = SensorModel::vlp32c();
     let orig = pts(&c, &s, false);
-    for (sev, (p, deg)) in MISALIGNMENT.iter().enumerate() {
+    for (sev, (p, deg)) in MISALIGNMENT_LEVELS.iter().enumerate() {
         // MultiCorrupt's transform_points, written out: M = Rx Ry Rz with its own sign
         // convention, applied as xyz . M^T (so p' = M p), then + [2, 0, 0].
         let (s_, c_) = (deg.to_radians().sin(), deg.to_radians().cos());

@@ -112,7 +112,8 @@ wide_fn! {
 
 /// C-D1 elastic: (alpha, sigma) of the displacement field, severities 1..5 (PerturbationDrive
 /// `elastic`).
-pub const ELASTIC: [(f32, f64); 5] = [(2.0, 0.4), (3.0, 0.75), (5.0, 0.9), (7.0, 1.2), (10.0, 1.5)];
+pub const ELASTIC_LEVELS: [(f32, f64); 5] =
+    [(2.0, 0.4), (3.0, 0.75), (5.0, 0.9), (7.0, 1.2), (10.0, 1.5)];
 
 /// C-D1 elastic: each frame draws two fields of U(-1, 1) alpha per pixel, smooths each with a
 /// Gaussian of the severity's sigma (kernel 2 ceil(4 sigma) + 1, as OpenCV picks for float images),
@@ -127,8 +128,8 @@ pub struct Elastic {
 }
 
 /// Registry constructor of C-D1.
-pub const ELASTIC_BUILDER: CameraBuilder = |s| {
-    let (alpha, sigma) = ELASTIC[s.level()];
+pub const ELASTIC: CameraBuilder = |s| {
+    let (alpha, sigma) = ELASTIC_LEVELS[s.level()];
     let k = 2 * (4.0 * sigma).ceil() as usize + 1;
     Ok(Box::new(Elastic {
         seed: s.seed,
@@ -491,7 +492,7 @@ wide_fn! {
 
 /// C-D4 sharpen: (centre boost k, weight w of the original), severities 1..5 (PerturbationDrive
 /// `sharpen_filter`).
-pub const SHARPEN: [(i32, f64); 5] = [(1, 0.9), (2, 0.8), (3, 0.7), (4, 0.6), (5, 0.5)];
+pub const SHARPEN_LEVELS: [(i32, f64); 5] = [(1, 0.9), (2, 0.8), (3, 0.7), (4, 0.6), (5, 0.5)];
 
 /// C-D4 sharpen: over-sharpening with the reference's kernel [[-1,-1,-1],[-1,8+k,-1],[-1,-1,-1]],
 /// whose sum is k and which is not normalised, so it also brightens by k and saturates in 8 bits
@@ -506,8 +507,8 @@ pub struct Sharpen {
 }
 
 /// Registry constructor of C-D4.
-pub const SHARPEN_BUILDER: CameraBuilder = |s| {
-    let (k, w) = SHARPEN[s.level()];
+pub const SHARPEN: CameraBuilder = |s| {
+    let (k, w) = SHARPEN_LEVELS[s.level()];
     Ok(Box::new(Sharpen {
         k,
         w10: (w * 10.0).round() as i32,
@@ -606,9 +607,7 @@ mod tests {
     fn sharpen_on_flat_grey_matches_the_reference_values() {
         let mut img = Image::new(5, 5, PixelFormat::Mono8);
         img.data.fill(100);
-        let got: Vec<u8> = (1..=5)
-            .map(|s| run(SHARPEN_BUILDER, s, &img, 0).data[12])
-            .collect();
+        let got: Vec<u8> = (1..=5).map(|s| run(SHARPEN, s, &img, 0).data[12]).collect();
         assert_eq!(got, vec![100, 120, 146, 162, 178]);
     }
 
@@ -663,7 +662,7 @@ mod tests {
     #[test]
     fn elastic_and_pairing_change_with_the_frame() {
         let img = crate::synthetic::street_image(120, 80, 0);
-        for b in [ELASTIC_BUILDER, SAMPLE_PAIRING] {
+        for b in [ELASTIC, SAMPLE_PAIRING] {
             assert_ne!(run(b, 3, &img, 1), run(b, 3, &img, 2));
             assert_eq!(run(b, 3, &img, 1), run(b, 3, &img, 1));
         }

@@ -18,7 +18,7 @@ fn copy(input: &ImageView<'_>, output: &mut ImageViewMut<'_>) {
 
 /// C-E1 splatter: (number of blobs, maximum radius in pixels at 800 x 503), severities 1..5
 /// (PerturbationDrive `splatter_mapping`: radius randint(5, max(6, 50 s)) for s = .1 .. .5).
-pub const SPLATTER: [(usize, i64); 5] = [(5, 5), (10, 9), (15, 14), (20, 19), (25, 24)];
+pub const SPLATTER_LEVELS: [(usize, i64); 5] = [(5, 5), (10, 9), (15, 14), (20, 19), (25, 24)];
 
 /// C-E1 splatter: dirt on the lens: black filled discs with centres uniform over the frame and
 /// radii uniform in [5, r_max] (scaled with the frame).
@@ -29,8 +29,8 @@ pub struct Splatter {
 }
 
 /// Registry constructor of C-E1.
-pub const SPLATTER_BUILDER: CameraBuilder = |s| {
-    let (count, r_max) = SPLATTER[s.level()];
+pub const SPLATTER: CameraBuilder = |s| {
+    let (count, r_max) = SPLATTER_LEVELS[s.level()];
     Ok(Box::new(Splatter {
         seed: s.seed,
         count,
@@ -63,7 +63,7 @@ impl CameraPerturbation for Splatter {
 ///
 /// Deviation: the reference draws `10 x scale_index` lines, none at severity 1; here the count is
 /// 10 x severity (10 .. 50), so every severity draws something and the count rises with severity.
-pub const DOTTED_LINES: [(usize, f32, i64); 5] = [
+pub const DOTTED_LINES_LEVELS: [(usize, f32, i64); 5] = [
     (10, 45.0, 0),
     (20, 40.0, 1),
     (30, 35.0, 1),
@@ -81,8 +81,8 @@ pub struct DottedLines {
 }
 
 /// Registry constructor of C-E2.
-pub const DOTTED_LINES_BUILDER: CameraBuilder = |s| {
-    let (lines, spacing, radius) = DOTTED_LINES[s.level()];
+pub const DOTTED_LINES: CameraBuilder = |s| {
+    let (lines, spacing, radius) = DOTTED_LINES_LEVELS[s.level()];
     Ok(Box::new(DottedLines {
         seed: s.seed,
         lines,
@@ -117,7 +117,7 @@ impl CameraPerturbation for DottedLines {
 
 /// C-E3 zigzag: (lines, amplitude at 800 x 503, angular frequency), severities 1..5
 /// (PerturbationDrive `zigzag_mapping`).
-pub const ZIGZAG: [(usize, f32, f32); 5] = [
+pub const ZIGZAG_LEVELS: [(usize, f32, f32); 5] = [
     (1, 2.0, 1.0),
     (2, 4.0, 2.0),
     (3, 6.0, 3.0),
@@ -136,8 +136,8 @@ pub struct Zigzag {
 }
 
 /// Registry constructor of C-E3.
-pub const ZIGZAG_BUILDER: CameraBuilder = |s| {
-    let (lines, amplitude, freq) = ZIGZAG[s.level()];
+pub const ZIGZAG: CameraBuilder = |s| {
+    let (lines, amplitude, freq) = ZIGZAG_LEVELS[s.level()];
     Ok(Box::new(Zigzag {
         seed: s.seed,
         lines,
@@ -180,7 +180,7 @@ impl CameraPerturbation for Zigzag {
 
 /// C-E4 canny_edges: (low, high) hysteresis thresholds, severities 1..5 (PerturbationDrive
 /// `canny_edges_mapping`); higher thresholds find fewer edges, as in the reference.
-pub const CANNY: [(i32, i32); 5] = [(51, 151), (60, 160), (75, 175), (90, 190), (120, 220)];
+pub const CANNY_LEVELS: [(i32, i32); 5] = [(51, 151), (60, 160), (75, 175), (90, 190), (120, 220)];
 
 /// Edges of an 8-bit grey plane as `cv2.Canny(gray, low, high)` finds them: 3x3 Sobel gradients
 /// (replicated borders), L1 magnitude |gx| + |gy|, non-maximum suppression across the gradient
@@ -322,8 +322,8 @@ pub struct CannyEdges {
 }
 
 /// Registry constructor of C-E4.
-pub const CANNY_BUILDER: CameraBuilder = |s| {
-    let (low, high) = CANNY[s.level()];
+pub const CANNY: CameraBuilder = |s| {
+    let (low, high) = CANNY_LEVELS[s.level()];
     Ok(Box::new(CannyEdges { low, high }))
 };
 
@@ -382,7 +382,7 @@ pub struct Cutout {
 }
 
 /// Registry constructor of C-E5.
-pub const CUTOUT_BUILDER: CameraBuilder = |s| {
+pub const CUTOUT: CameraBuilder = |s| {
     Ok(Box::new(Cutout {
         seed: s.seed,
         count: CUTOUT_COUNT[s.level()],
@@ -564,7 +564,7 @@ mod tests {
                 count: CUTOUT_COUNT[s as usize - 1],
             };
             let rects = p.rects(800, 503, 4);
-            let out = run(CUTOUT_BUILDER, s, &img, 4);
+            let out = run(CUTOUT, s, &img, 4);
             let black = out.data.chunks_exact(3).filter(|p| *p == [0, 0, 0]).count();
             // Rectangles may overlap: the black area is at most their sum, at least the largest.
             let areas: Vec<i64> = rects.iter().map(|r| r.2 * r.3).collect();
@@ -584,7 +584,7 @@ mod tests {
 
     #[test]
     fn splatter_draws_the_configured_number_of_blobs() {
-        let out = run(SPLATTER_BUILDER, 1, &bright(800, 503), 2);
+        let out = run(SPLATTER, 1, &bright(800, 503), 2);
         // 5 discs of radius 5: regions can merge when discs overlap, rarely.
         let n = black_regions(&out);
         assert!((4..=5).contains(&n), "{n}");
@@ -610,7 +610,7 @@ mod tests {
         );
         let img = crate::synthetic::street_image(200, 120, 0);
         let edges = |s| {
-            run(CANNY_BUILDER, s, &img, 0)
+            run(CANNY, s, &img, 0)
                 .data
                 .chunks_exact(3)
                 .filter(|p| p[0] > p[1] + 40)
@@ -622,7 +622,7 @@ mod tests {
     #[test]
     fn dotted_lines_and_zigzag_draw_more_with_severity() {
         let img = bright(400, 250);
-        for b in [DOTTED_LINES_BUILDER, ZIGZAG_BUILDER] {
+        for b in [DOTTED_LINES, ZIGZAG] {
             let black = |s| {
                 run(b, s, &img, 1)
                     .data

@@ -518,7 +518,7 @@ impl CameraPerturbation for Rain {
 /// C-C12 snowflakes: flakes at the reference's 320 x 240, severities 1..5 (PerturbationDrive
 /// `effects_snowflake_dynamic`: N = 100 (scale + 1) with its scale 0..4, so 100 .. 500; the
 /// table read 200 .. 600, from severities 1..5 taken for the scale, until issue 16).
-pub const SNOWFLAKES: [usize; 5] = [100, 200, 300, 400, 500];
+pub const SNOWFLAKES_LEVELS: [usize; 5] = [100, 200, 300, 400, 500];
 
 /// C-C12 snowflakes: driving into snow: soft white flakes stream radially away from the image
 /// centre at constant speed, as the reference moves them, and grow as they come closer. Each flake
@@ -539,10 +539,10 @@ pub struct Snowflakes {
 }
 
 /// Registry constructor of C-C12.
-pub const SNOWFLAKES_BUILDER: CameraBuilder = |s| {
+pub const SNOWFLAKES: CameraBuilder = |s| {
     let (w, h) = (s.geometry.width as f32, s.geometry.height as f32);
     let k = size_scale(s.geometry.width, s.geometry.height).max(0.05);
-    let n = (SNOWFLAKES[s.level()] as f32 * (w * h) / (320.0 * 240.0)) as usize + 1;
+    let n = (SNOWFLAKES_LEVELS[s.level()] as f32 * (w * h) / (320.0 * 240.0)) as usize + 1;
     let mut rng = Rng::for_setup(s.seed, 0xC12);
     let flakes = (0..n)
         .map(|_| {
@@ -633,7 +633,7 @@ pub const RAINDROP_MAX_RADIUS: [f32; 5] = [5.0, 10.0, 15.0, 20.0, 25.0];
 
 /// Drops on the windshield at once (the reference keeps 9 at 320 x 240; the count is per frame,
 /// independent of resolution, since drops scale with the frame).
-pub const RAINDROPS: usize = 12;
+pub const RAINDROP_COUNT: usize = 12;
 
 /// C-C8 raindrops: water drops on the windshield that refract the scene and slide down. Each drop
 /// is a circle, or a circle with a lower half-ellipse (a teardrop); it shows an inverted, minified,
@@ -650,12 +650,12 @@ pub struct Raindrops {
 }
 
 /// Registry constructor of C-C8.
-pub const RAINDROPS_BUILDER: CameraBuilder = |s| {
+pub const RAINDROPS: CameraBuilder = |s| {
     let mut rng = Rng::for_setup(s.seed, 0xC8);
     Ok(Box::new(Raindrops {
         seed: s.seed,
         r_max: RAINDROP_MAX_RADIUS[s.level()],
-        drops: (0..RAINDROPS)
+        drops: (0..RAINDROP_COUNT)
             .map(|_| (0.6 + rng.f32() * 1.2, rng.f32() * 10_000.0))
             .collect(),
     }))
@@ -1177,14 +1177,7 @@ mod tests {
     #[test]
     fn animated_effects_move_and_any_frame_is_reproducible_alone() {
         let img = crate::synthetic::street_image(240, 150, 0);
-        for b in [
-            RAIN,
-            RAINDROPS_BUILDER,
-            LIGHTNING,
-            SMOKE,
-            SUN_GLARE,
-            SNOWFLAKES_BUILDER,
-        ] {
+        for b in [RAIN, RAINDROPS, LIGHTNING, SMOKE, SUN_GLARE, SNOWFLAKES] {
             let f40 = run_seq(b, 3, &img, 40);
             let f41 = run_seq(b, 3, &img, 41);
             assert_ne!(f40, f41, "frame 40 and 41 differ");
@@ -1234,7 +1227,7 @@ mod tests {
             RAIN,
             SMOKE,
             SUN_GLARE,
-            SNOWFLAKES_BUILDER,
+            SNOWFLAKES,
             BRIGHTNESS_UP,
             BRIGHTNESS_DOWN,
         ] {

@@ -43,7 +43,7 @@ impl LidarPerturbation for MotionBlur {
 
 /// L-F4 spatial_misalignment: (probability that a cloud is misaligned, rotation angle in degrees),
 /// MultiCorrupt levels 1..3 (`transform_points`).
-pub const MISALIGNMENT: [(f64, f64); 3] = [(0.2, 1.0), (0.4, 2.0), (0.6, 3.0)];
+pub const MISALIGNMENT_LEVELS: [(f64, f64); 3] = [(0.2, 1.0), (0.4, 2.0), (0.6, 3.0)];
 
 /// Translation MultiCorrupt adds to a misaligned cloud, in metres.
 pub const MISALIGNMENT_SHIFT_M: [f32; 3] = [2.0, 0.0, 0.0];
@@ -88,8 +88,8 @@ pub fn multicorrupt_rotation(deg: f64) -> [[f32; 3]; 3] {
 }
 
 /// Registry constructor of L-F4.
-pub const MISALIGNMENT_BUILDER: LidarBuilder = |s| {
-    let (p, deg) = MISALIGNMENT[s.level()];
+pub const MISALIGNMENT: LidarBuilder = |s| {
+    let (p, deg) = MISALIGNMENT_LEVELS[s.level()];
     Ok(Box::new(SpatialMisalignment {
         seed: s.seed,
         probability: p,
