@@ -46,6 +46,11 @@ pub struct Args {
     /// Only these IDs (repeatable).
     #[arg(long = "id")]
     ids: Vec<String>,
+    /// For every perturbation and severity whose median frame misses the budget, time it again
+    /// with 2, 3, ... threads up to this machine's cores and report how many it needs; beyond the
+    /// cores, estimate the count from the measured speed-up (Amdahl's law, marked `~`).
+    #[arg(long)]
+    fit_threads: bool,
     /// Budget in milliseconds (default 33 for camera, 200 for LiDAR).
     #[arg(long)]
     budget_ms: Option<f64>,
@@ -73,10 +78,52 @@ pub struct Args {
     format: Format,
 }
 
+/// How many worker threads a perturbation needs for its median frame to fit the budget.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Fit {
+    /// The thread count.
+    pub threads: usize,
+    /// True when it is beyond this machine's cores, estimated from the measured speed-up.
+    pub estimated: bool,
+}
+
+impl std::fmt::Display for Fit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.estimated {
+            write!(f, "~{}", self.threads)
+        } else {
+            write!(f, "{}", self.threads)
+        }
+    }
+}
+
+/// The thread count at which Amdahl's law puts a frame that takes `t1` ms on one thread and
+/// `tn` ms on `n` threads under `budget` ms: the serial share `s` solves `tn = t1 (s + (1 - s) /
+/// n)`, and the count is the least `k` with `t1 (s + (1 - s) / k) <= budget`. `None` when the
+/// serial part alone exceeds the budget or the measurements show no speed-up.
+pub fn amdahl_threads(t1: f64, tn: f64, n: usize, budget: f64) -> Option<usize> {
+    if t1 <= budget {
+        return Some(1);
+    }
+    let n = n as f64;
+    if n < 2.0 || tn >= t1 {
+        return None;
+    }
+    let s = ((tn / t1 - 1.0 / n) / (1.0 - 1.0 / n)).clamp(0.0, 1.0);
+    let room = budget / t1 - s;
+    if room <= 0.0 {
+        return None;
+    }
+    Some(((1.0 - s) / room).ceil().max(1.0) as usize)
+}
+
 #[derive(serde::Serialize)]
 struct Row<'a> {
     #[serde(flatten)]
     timing: &'a Timing,
+    /// --fit-threads: the threads the median frame needs to fit the budget.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    threads_to_fit: Option<Fit>,
     budget_ms: f64,
     fits_budget: bool,
     /// --hil: mean latency with every perturbation off (the middleware alone).
@@ -131,13 +178,14 @@ pub fn run(a: Args) -> Result<()> {
             overhead_ms: r.overhead_ms,
             dropped: &r.dropped,
         };
-        return print_report(&r.rows, budget, format, Some(&live));
+        return print_report(&r.rows, budget, format, Some(&live), &[]);
     }
     let input = match &a.input {
         Some(p) => p.clone(),
         None => default_input(a.modality)?,
     };
     let mut rows: Vec<Timing> = Vec::new();
+    let mut fits: Vec<Option<Fit>> = Vec::new();
     match (a.modality, load(&input)?) {
         (Modality::Camera, Loaded::Image(img, _)) => {
             let frame = if (img.width, img.height) == (a.width, a.height) {
@@ -154,10 +202,18 @@ pub fn run(a: Args) -> Result<()> {
             );
             for e in of_modality(Modality::Camera).filter(|e| selected(e.id)) {
                 for s in e.severities() {
-                    rows.push(
-                        pool.install(|| time_camera(e, s, 1, &frame.view(), a.frames))
-                            .with_context(|| format!("{} severity {s}", e.id))?,
-                    );
+                    let t = pool
+                        .install(|| time_camera(e, s, 1, &frame.view(), a.frames))
+                        .with_context(|| format!("{} severity {s}", e.id))?;
+                    let fit = a.fit_threads.then(|| {
+                        threads_to_fit(&t, a.threads, budget, |pool| {
+                            pool.install(|| time_camera(e, s, 1, &frame.view(), a.frames))
+                        })
+                    });
+                    rows.push(t);
+                    if let Some(f) = fit {
+                        fits.push(f?);
+                    }
                 }
             }
         }
@@ -177,10 +233,18 @@ pub fn run(a: Args) -> Result<()> {
             );
             for e in of_modality(Modality::Lidar).filter(|e| selected(e.id)) {
                 for s in e.severities() {
-                    rows.push(
-                        pool.install(|| time_lidar(e, s, 1, &sensor, &cloud.view(), a.frames))
-                            .with_context(|| format!("{} severity {s}", e.id))?,
-                    );
+                    let t = pool
+                        .install(|| time_lidar(e, s, 1, &sensor, &cloud.view(), a.frames))
+                        .with_context(|| format!("{} severity {s}", e.id))?;
+                    let fit = a.fit_threads.then(|| {
+                        threads_to_fit(&t, a.threads, budget, |pool| {
+                            pool.install(|| time_lidar(e, s, 1, &sensor, &cloud.view(), a.frames))
+                        })
+                    });
+                    rows.push(t);
+                    if let Some(f) = fit {
+                        fits.push(f?);
+                    }
                 }
             }
         }
@@ -194,10 +258,56 @@ pub fn run(a: Args) -> Result<()> {
             }
         ),
     }
-    print_report(&rows, budget, format, None)
+    print_report(&rows, budget, format, None, &fits)
 }
 
-fn print_report(rows: &[Timing], budget: f64, format: Format, live: Option<&Live>) -> Result<()> {
+/// The threads `t` (measured with `base` threads) needs for its median frame to fit `budget`:
+/// `None` when it fits already; measured with more threads up to this machine's cores, then
+/// estimated from the last two measurements.
+fn threads_to_fit(
+    t: &Timing,
+    base: usize,
+    budget: f64,
+    time: impl Fn(&rayon::ThreadPool) -> perturb_core::Result<Timing>,
+) -> Result<Option<Fit>> {
+    if t.median_ms <= budget {
+        return Ok(None);
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let (mut n, mut tn) = (base.max(1), t.median_ms);
+    let t1 = if n == 1 { Some(t.median_ms) } else { None };
+    let mut t1 = t1;
+    while n < cores {
+        n += 1;
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build()?;
+        tn = time(&pool)?.median_ms;
+        if tn <= budget {
+            return Ok(Some(Fit {
+                threads: n,
+                estimated: false,
+            }));
+        }
+    }
+    if t1.is_none() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+        t1 = Some(time(&pool)?.median_ms);
+    }
+    let t1 = t1.unwrap_or(t.median_ms);
+    Ok(amdahl_threads(t1, tn, n, budget).map(|k| Fit {
+        threads: k.max(n + 1),
+        estimated: true,
+    }))
+}
+
+fn print_report(
+    rows: &[Timing],
+    budget: f64,
+    format: Format,
+    live: Option<&Live>,
+    fits: &[Option<Fit>],
+) -> Result<()> {
+    let fit_of = |i: usize| fits.get(i).copied().flatten();
+    let fit_cell = |f: Option<Fit>| f.map_or("-".to_string(), |f| f.to_string());
     match format {
         Format::Json => {
             let out: Vec<Row<'_>> = rows
@@ -205,6 +315,7 @@ fn print_report(rows: &[Timing], budget: f64, format: Format, live: Option<&Live
                 .enumerate()
                 .map(|(i, t)| Row {
                     timing: t,
+                    threads_to_fit: fit_of(i),
                     budget_ms: budget,
                     fits_budget: t.max_ms <= budget,
                     node_overhead_ms: live.map(|l| l.overhead_ms),
@@ -215,11 +326,16 @@ fn print_report(rows: &[Timing], budget: f64, format: Format, live: Option<&Live
         }
         Format::Csv => {
             println!(
-                "id,name,severity,frames,setup_ms,mean_ms,median_ms,p99_ms,max_ms,budget_ms,fits_budget{}",
+                "id,name,severity,frames,setup_ms,mean_ms,median_ms,p99_ms,max_ms,budget_ms,fits_budget{}{}",
                 if live.is_some() {
                     ",node_overhead_ms,dropped"
                 } else {
                     ""
+                },
+                if fits.is_empty() {
+                    ""
+                } else {
+                    ",threads_to_fit"
                 }
             );
             for (i, t) in rows.iter().enumerate() {
@@ -232,6 +348,11 @@ fn print_report(rows: &[Timing], budget: f64, format: Format, live: Option<&Live
                         )
                     })
                     .unwrap_or_default();
+                let extra = if fits.is_empty() {
+                    extra
+                } else {
+                    format!("{extra},{}", fit_cell(fit_of(i)))
+                };
                 println!(
                     "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{}{extra}",
                     t.id,
@@ -261,20 +382,49 @@ fn print_report(rows: &[Timing], budget: f64, format: Format, live: Option<&Live
             }
             let mut ids: Vec<&'static str> = rows.iter().map(|t| t.id).collect();
             ids.dedup();
+            let with_fit = !fits.is_empty();
             if md {
                 println!(
-                    "| id | name | mean ms (avg over severities) | median ms (max over severities) | max ms | setup ms | fits {budget} ms |"
+                    "| id | name | mean ms (avg over severities) | median ms (max over severities) | max ms | setup ms | fits {budget} ms |{}",
+                    if with_fit { " threads to fit |" } else { "" }
                 );
-                println!("|---|---|---:|---:|---:|---:|:---:|");
+                println!(
+                    "|---|---|---:|---:|---:|---:|:---:|{}",
+                    if with_fit { "---:|" } else { "" }
+                );
             } else {
                 println!(
-                    "{:<7} {:<24} {:>9} {:>10} {:>9} {:>9}  fits {budget} ms",
-                    "id", "name", "mean_ms", "median_ms", "max_ms", "setup_ms"
+                    "{:<7} {:<24} {:>9} {:>10} {:>9} {:>9}  fits {budget} ms{}",
+                    "id",
+                    "name",
+                    "mean_ms",
+                    "median_ms",
+                    "max_ms",
+                    "setup_ms",
+                    if with_fit { "  threads to fit" } else { "" }
                 );
             }
             let mut fits_all = 0;
             for id in &ids {
                 let rs: Vec<&Timing> = rows.iter().filter(|t| t.id == *id).collect();
+                // The most threads any severity needs (an estimate wins over a measurement of
+                // the same count: it is the less certain figure).
+                let need = rows
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, t)| t.id == *id)
+                    .filter_map(|(i, _)| fit_of(i))
+                    .max_by_key(|f| (f.threads, f.estimated));
+                let need = if with_fit {
+                    let cell = need.map_or_else(|| "1".to_string(), |f| f.to_string());
+                    if md {
+                        format!(" {cell} |")
+                    } else {
+                        format!("  {cell:>6}")
+                    }
+                } else {
+                    String::new()
+                };
                 let mean = rs.iter().map(|t| t.mean_ms).sum::<f64>() / rs.len() as f64;
                 let med = rs.iter().map(|t| t.median_ms).fold(0.0, f64::max);
                 let max = rs.iter().map(|t| t.max_ms).fold(0.0, f64::max);
@@ -284,12 +434,12 @@ fn print_report(rows: &[Timing], budget: f64, format: Format, live: Option<&Live
                 let mark = if fits { "yes" } else { "NO" };
                 if md {
                     println!(
-                        "| {} | {} | {mean:.2} | {med:.2} | {max:.2} | {setup:.1} | {mark} |",
+                        "| {} | {} | {mean:.2} | {med:.2} | {max:.2} | {setup:.1} | {mark} |{need}",
                         id, rs[0].name
                     );
                 } else {
                     println!(
-                        "{:<7} {:<24} {mean:>9.2} {med:>10.2} {max:>9.2} {setup:>9.1}  {mark}",
+                        "{:<7} {:<24} {mean:>9.2} {med:>10.2} {max:>9.2} {setup:>9.1}  {mark}{need}",
                         id, rs[0].name
                     );
                 }
@@ -305,4 +455,23 @@ fn print_report(rows: &[Timing], budget: f64, format: Format, live: Option<&Live
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::amdahl_threads;
+
+    #[test]
+    fn amdahl_counts_follow_the_measured_speed_up() {
+        // Perfectly parallel: 100 ms on one thread, 50 on two: 4 threads for 25 ms, 4 for 30.
+        assert_eq!(amdahl_threads(100.0, 50.0, 2, 25.0), Some(4));
+        assert_eq!(amdahl_threads(100.0, 50.0, 2, 30.0), Some(4));
+        // A fifth serial: 100 -> 60 ms on two threads; 33 ms needs ceil(0.8 / 0.13) = 7.
+        assert_eq!(amdahl_threads(100.0, 60.0, 2, 33.0), Some(7));
+        // The serial part alone (60 %) misses a 50 ms budget; no speed-up gives no count.
+        assert_eq!(amdahl_threads(100.0, 80.0, 2, 50.0), None);
+        assert_eq!(amdahl_threads(100.0, 100.0, 2, 50.0), None);
+        // Already fits.
+        assert_eq!(amdahl_threads(20.0, 15.0, 2, 33.0), Some(1));
+    }
 }

@@ -515,6 +515,60 @@ fn bench_json_has_the_documented_fields() {
 }
 
 #[test]
+fn bench_fit_threads_adds_the_threads_column() {
+    let Some(data) = shared("bench_fit_threads") else {
+        return;
+    };
+    let img = data.join("kitti/image_2/000000.png");
+    let args = |budget: &'static str, format: &'static str| {
+        vec![
+            "bench".to_string(),
+            "--modality".into(),
+            "camera".into(),
+            "--input".into(),
+            img.to_str().unwrap().into(),
+            "--width".into(),
+            "200".into(),
+            "--height".into(),
+            "120".into(),
+            "--frames".into(),
+            "2".into(),
+            "--id".into(),
+            "C-F7".into(),
+            "--fit-threads".into(),
+            "--budget-ms".into(),
+            budget.into(),
+            "--format".into(),
+            format.into(),
+        ]
+    };
+    let run = |v: Vec<String>| ok(&v.iter().map(String::as_str).collect::<Vec<_>>());
+    // A generous budget: every severity fits on one thread.
+    let md = run(args("10000", "markdown"));
+    assert!(md.contains("threads to fit"), "{md}");
+    let row = md.lines().find(|l| l.starts_with("| C-F7")).unwrap();
+    assert!(row.trim_end().ends_with("| 1 |"), "{row}");
+    // No budget a frame can meet: none of the rows fits, and the CSV says what more threads
+    // give (a count, an estimate `~n`, or `-` when the serial part alone is too slow).
+    let csv = run(args("0.000001", "csv"));
+    assert!(
+        csv.lines().next().unwrap().ends_with(",threads_to_fit"),
+        "{csv}"
+    );
+    for l in csv.lines().skip(1) {
+        let cell = l.rsplit(',').next().unwrap();
+        assert!(
+            cell == "-"
+                || cell
+                    .trim_start_matches('~')
+                    .parse::<usize>()
+                    .is_ok_and(|n| n > 1),
+            "{l}"
+        );
+    }
+}
+
+#[test]
 fn demo_writes_outputs() {
     let d = tmp("demo");
     let out = ok(&[
