@@ -3,15 +3,13 @@
 //! tiny images, a visible change on a real street frame, and a distortion that moves with severity
 //! as the reference's does.
 
+#[macro_use]
 mod common;
 
 use perturb_core::error::Error;
 use perturb_core::image::{Image, ImageView, PixelFormat, resize_bilinear};
 use perturb_core::perturber::CameraPerturber;
 use perturb_core::registry::{Entry, Modality};
-
-/// The modality whose catalogue entries this file checks.
-const MODALITY: Modality = Modality::Camera;
 
 /// A deterministic synthetic street-like frame: sky gradient, grey road, a few coloured blocks.
 fn synthetic(w: u32, h: u32, format: PixelFormat) -> Image {
@@ -271,96 +269,58 @@ fn snowflakes_follow_the_reference_count() {
     );
 }
 
-/// One module per catalogue entry, named after its ID (`c_a1`), holding a test per
-/// property: `cargo test -p perturb-core c_a1` checks one perturbation, and a failure in one
-/// entry does not hide the others.
-macro_rules! per_entry {
-    ($($module:ident => $id:literal),* $(,)?) => {
-        $(
-            mod $module {
-                fn entry() -> &'static perturb_core::registry::Entry {
-                    perturb_core::find($id).expect("in the catalogue")
-                }
-                #[test]
-                fn deterministic_and_stride_and_thread_independent() {
-                    super::deterministic_and_stride_and_thread_independent(entry());
-                }
-                #[test]
-                fn every_format_keeps_geometry_and_alpha() {
-                    super::every_format_keeps_geometry_and_alpha(entry());
-                }
-                #[test]
-                fn tiny_and_odd_sizes_do_not_panic() {
-                    super::tiny_and_odd_sizes_do_not_panic(entry());
-                }
-                #[test]
-                fn changes_a_real_frame_at_every_severity() {
-                    super::changes_a_real_frame_at_every_severity(entry());
-                }
-                #[test]
-                fn distortion_moves_with_severity_on_a_real_frame() {
-                    super::distortion_moves_with_severity_on_a_real_frame(entry());
-                }
-                #[test]
-                fn wide_and_baseline_code_give_the_same_bytes() {
-                    super::wide_and_baseline_code_give_the_same_bytes(entry());
-                }
-            }
-        )*
-
-        /// The list below is the catalogue: a new perturbation needs its line here.
-        #[test]
-        fn every_entry_has_its_tests() {
-            let listed = [$($id),*];
-            let catalogue: Vec<&str> = perturb_core::registry::of_modality(MODALITY)
-                .map(|e| e.id)
-                .collect();
-            assert_eq!(listed.to_vec(), catalogue);
-        }
-    };
-}
-
 per_entry! {
-    c_a1 => "C-A1",
-    c_a2 => "C-A2",
-    c_a3 => "C-A3",
-    c_a4 => "C-A4",
-    c_a5 => "C-A5",
-    c_b1 => "C-B1",
-    c_b2 => "C-B2",
-    c_b3 => "C-B3",
-    c_b4 => "C-B4",
-    c_b5 => "C-B5",
-    c_b6 => "C-B6",
-    c_b7 => "C-B7",
-    c_c1 => "C-C1",
-    c_c2 => "C-C2",
-    c_c3 => "C-C3",
-    c_c4 => "C-C4",
-    c_c5 => "C-C5",
-    c_c6 => "C-C6",
-    c_c7 => "C-C7",
-    c_c8 => "C-C8",
-    c_c9 => "C-C9",
-    c_c10 => "C-C10",
-    c_c11 => "C-C11",
-    c_c12 => "C-C12",
-    c_d1 => "C-D1",
-    c_d2 => "C-D2",
-    c_d3 => "C-D3",
-    c_d4 => "C-D4",
-    c_e1 => "C-E1",
-    c_e2 => "C-E2",
-    c_e3 => "C-E3",
-    c_e4 => "C-E4",
-    c_e5 => "C-E5",
-    c_e6 => "C-E6",
-    c_f1 => "C-F1",
-    c_f2 => "C-F2",
-    c_f3 => "C-F3",
-    c_f4 => "C-F4",
-    c_f5 => "C-F5",
-    c_f6 => "C-F6",
-    c_f7 => "C-F7",
-    c_f8 => "C-F8",
+    Modality::Camera,
+    [
+        deterministic_and_stride_and_thread_independent,
+        every_format_keeps_geometry_and_alpha,
+        tiny_and_odd_sizes_do_not_panic,
+        changes_a_real_frame_at_every_severity,
+        distortion_moves_with_severity_on_a_real_frame,
+        wide_and_baseline_code_give_the_same_bytes,
+    ],
+    {
+        c_a1 => "C-A1",
+        c_a2 => "C-A2",
+        c_a3 => "C-A3",
+        c_a4 => "C-A4",
+        c_a5 => "C-A5",
+        c_b1 => "C-B1",
+        c_b2 => "C-B2",
+        c_b3 => "C-B3",
+        c_b4 => "C-B4",
+        c_b5 => "C-B5",
+        c_b6 => "C-B6",
+        c_b7 => "C-B7",
+        c_c1 => "C-C1",
+        c_c2 => "C-C2",
+        c_c3 => "C-C3",
+        c_c4 => "C-C4",
+        c_c5 => "C-C5",
+        c_c6 => "C-C6",
+        c_c7 => "C-C7",
+        c_c8 => "C-C8",
+        c_c9 => "C-C9",
+        c_c10 => "C-C10",
+        c_c11 => "C-C11",
+        c_c12 => "C-C12",
+        c_d1 => "C-D1",
+        c_d2 => "C-D2",
+        c_d3 => "C-D3",
+        c_d4 => "C-D4",
+        c_e1 => "C-E1",
+        c_e2 => "C-E2",
+        c_e3 => "C-E3",
+        c_e4 => "C-E4",
+        c_e5 => "C-E5",
+        c_e6 => "C-E6",
+        c_f1 => "C-F1",
+        c_f2 => "C-F2",
+        c_f3 => "C-F3",
+        c_f4 => "C-F4",
+        c_f5 => "C-F5",
+        c_f6 => "C-F6",
+        c_f7 => "C-F7",
+        c_f8 => "C-F8",
+    }
 }

@@ -2,6 +2,7 @@
 //! layout preserved in odd layouts (unaligned, big-endian, float64), untouched fields passed through,
 //! empty and single-point clouds, and a change on a real KITTI scan.
 
+#[macro_use]
 mod common;
 
 use perturb_core::cloud::{Cloud, CloudView, Datatype, PointField, PointLayout};
@@ -9,8 +10,6 @@ use perturb_core::lidar::Box3;
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::registry::{Entry, Modality};
 
-/// The modality whose catalogue entries this file checks.
-const MODALITY: Modality = Modality::Lidar;
 use perturb_core::rng::Rng;
 use perturb_core::sensors::SensorModel;
 
@@ -190,73 +189,44 @@ fn changes_a_real_kitti_scan_at_every_severity(e: &Entry) {
     }
 }
 
-/// One module per catalogue entry, named after its ID (`l_a1`), holding a test per
-/// property: `cargo test -p perturb-core l_a1` checks one perturbation, and a failure in one
-/// entry does not hide the others.
-macro_rules! per_entry {
-    ($($module:ident => $id:literal),* $(,)?) => {
-        $(
-            mod $module {
-                fn entry() -> &'static perturb_core::registry::Entry {
-                    perturb_core::find($id).expect("in the catalogue")
-                }
-                #[test]
-                fn deterministic_layout_preserving_and_passing_fields_through() {
-                    super::deterministic_layout_preserving_and_passing_fields_through(entry());
-                }
-                #[test]
-                fn empty_and_single_point_clouds() {
-                    super::empty_and_single_point_clouds(entry());
-                }
-                #[test]
-                fn changes_a_real_kitti_scan_at_every_severity() {
-                    super::changes_a_real_kitti_scan_at_every_severity(entry());
-                }
-            }
-        )*
-
-        /// The list below is the catalogue: a new perturbation needs its line here.
-        #[test]
-        fn every_entry_has_its_tests() {
-            let listed = [$($id),*];
-            let catalogue: Vec<&str> = perturb_core::registry::of_modality(MODALITY)
-                .map(|e| e.id)
-                .collect();
-            assert_eq!(listed.to_vec(), catalogue);
-        }
-    };
-}
-
 per_entry! {
-    l_a1 => "L-A1",
-    l_a2 => "L-A2",
-    l_a3 => "L-A3",
-    l_a4 => "L-A4",
-    l_a5 => "L-A5",
-    l_a6 => "L-A6",
-    l_a7 => "L-A7",
-    l_a8 => "L-A8",
-    l_a9 => "L-A9",
-    l_a10 => "L-A10",
-    l_b1 => "L-B1",
-    l_b2 => "L-B2",
-    l_b3 => "L-B3",
-    l_b4 => "L-B4",
-    l_b5 => "L-B5",
-    l_b6 => "L-B6",
-    l_c1 => "L-C1",
-    l_c2 => "L-C2",
-    l_c3 => "L-C3",
-    l_d1 => "L-D1",
-    l_d2 => "L-D2",
-    l_d3 => "L-D3",
-    l_d4 => "L-D4",
-    l_d5 => "L-D5",
-    l_e1 => "L-E1",
-    l_e2 => "L-E2",
-    l_e3 => "L-E3",
-    l_f1 => "L-F1",
-    l_f2 => "L-F2",
-    l_f3 => "L-F3",
-    l_f4 => "L-F4",
+    Modality::Lidar,
+    [
+        deterministic_layout_preserving_and_passing_fields_through,
+        empty_and_single_point_clouds,
+        changes_a_real_kitti_scan_at_every_severity,
+    ],
+    {
+        l_a1 => "L-A1",
+        l_a2 => "L-A2",
+        l_a3 => "L-A3",
+        l_a4 => "L-A4",
+        l_a5 => "L-A5",
+        l_a6 => "L-A6",
+        l_a7 => "L-A7",
+        l_a8 => "L-A8",
+        l_a9 => "L-A9",
+        l_a10 => "L-A10",
+        l_b1 => "L-B1",
+        l_b2 => "L-B2",
+        l_b3 => "L-B3",
+        l_b4 => "L-B4",
+        l_b5 => "L-B5",
+        l_b6 => "L-B6",
+        l_c1 => "L-C1",
+        l_c2 => "L-C2",
+        l_c3 => "L-C3",
+        l_d1 => "L-D1",
+        l_d2 => "L-D2",
+        l_d3 => "L-D3",
+        l_d4 => "L-D4",
+        l_d5 => "L-D5",
+        l_e1 => "L-E1",
+        l_e2 => "L-E2",
+        l_e3 => "L-E3",
+        l_f1 => "L-F1",
+        l_f2 => "L-F2",
+        l_f3 => "L-F3",
+        l_f4 => "L-F4",
+    }
 }

@@ -1,8 +1,8 @@
 //! `perturb analyze`: the closed-loop half of the study from recorded runs; `perturb analyze
 //! transfer` (offline vs closed-loop) and `perturb analyze compare` (fine-tuned vs baseline).
 
-use crate::format::Format;
 use anyhow::{Context, Result, bail};
+use perturb_study::Format;
 use perturb_study::analyze::{
     Aggregate, AnalyzeConfig, JitterUnit, ObjectsConfig, ObjectsFrame, TopicField,
     render_conditions, render_perturbations, render_runs, render_segments,
@@ -425,7 +425,7 @@ pub fn run(a: Args) -> Result<()> {
     if a.json {
         print!("{}", analysis_json(&analysis, &hot));
     } else {
-        let format: perturb_study::Format = a.format.into();
+        let format: perturb_study::Format = a.format;
         let tables = if a.table.is_empty() {
             vec![
                 TableKind::Runs,
@@ -532,7 +532,7 @@ fn transfer(t: TransferArgs) -> Result<()> {
         "{} (perturbation, severity) pairs in both tables; {} resamples from seed {}",
         res.matched, res.resamples, res.seed
     );
-    print!("{}", render(&res, t.format.into()));
+    print!("{}", render(&res, t.format));
     Ok(())
 }
 
@@ -553,7 +553,7 @@ fn compare(c: CompareArgs) -> Result<()> {
         sets.push((name.to_string(), a));
     }
     let rows = perturb_study::compare::compare(&sets, cfg.aggregate);
-    print!("{}", perturb_study::compare::render(&rows, c.format.into()));
+    print!("{}", perturb_study::compare::render(&rows, c.format));
     if failed > 0 {
         bail!("{failed} runs could not be analysed (the others were)");
     }

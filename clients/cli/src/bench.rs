@@ -1,10 +1,10 @@
 //! `perturb bench`: latency of every perturbation at every severity on a real frame or scan.
 
-use crate::format::Format;
 use anyhow::{Context, Result, bail};
 use perturb_core::bench::{Timing, time_camera, time_lidar};
 use perturb_core::image::resize_bilinear;
 use perturb_core::registry::{Modality, of_modality};
+use perturb_study::Format;
 use perturb_study::files::{Loaded, describe_sensor, load, sensor_for};
 use std::path::PathBuf;
 

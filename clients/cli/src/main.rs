@@ -12,7 +12,6 @@ mod ctl;
 mod demo;
 mod demo_offline;
 mod detect;
-mod format;
 mod gallery;
 mod hil;
 mod info;

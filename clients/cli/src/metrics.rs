@@ -1,8 +1,8 @@
 //! `perturb metrics`: the study's tables from batch outputs and model predictions.
 
-use crate::format::Format;
 use crate::progress::{Bar, Notes};
 use anyhow::{Result, bail};
+use perturb_study::Format;
 use std::path::PathBuf;
 
 /// Arguments of `perturb metrics`.
@@ -111,10 +111,7 @@ pub fn run(a: Args) -> Result<()> {
                     f.display()
                 );
             }
-            print!(
-                "{}",
-                perturb_study::steering::render(&report, format.into())
-            );
+            print!("{}", perturb_study::steering::render(&report, format));
             Ok(())
         }
         Command::Lidar {
@@ -170,7 +167,7 @@ pub fn run(a: Args) -> Result<()> {
                 .build()?;
             let bar = Bar::new("clouds detected", quiet);
             let report = pool.install(|| lidar_eval::evaluate(&clean, &sets, &cfg, &bar))?;
-            print!("{}", lidar_eval::render(&report, format.into()));
+            print!("{}", lidar_eval::render(&report, format));
             Ok(())
         }
     }

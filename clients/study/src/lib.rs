@@ -48,8 +48,9 @@ pub mod transfer;
 pub use error::{Result, StudyError};
 pub use progress::{Progress, Silent};
 
-/// Output format of a table.
+/// Output format of a table (with the `clap` feature, also a command-line value).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Format {
     /// Aligned terminal table.
     #[default]

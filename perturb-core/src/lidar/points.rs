@@ -29,6 +29,8 @@ pub struct Points {
     pub ring_derived: bool,
     /// The sensor's frame convention the positions were converted from.
     pub axes: Axes,
+    /// The ring table of the last sensor model rings were derived for (kept between frames).
+    ring_table: Option<RingTable>,
 }
 
 impl Points {
@@ -81,11 +83,19 @@ impl Points {
             if let Some(rr) = layout.reader_any(names::RING) {
                 ring.extend((0..n).map(|i| rr.read_f64(cloud.point(i)).clamp(0.0, 65535.0) as u16));
             } else {
-                let rings = RingTable::new(sensor);
-                ring.extend((0..n).map(|i| {
-                    let (x, y, z) = (self.x[i], self.y[i], self.z[i]);
-                    rings.ring_of_elevation(z.atan2((x * x + y * y).sqrt()))
-                }));
+                if self
+                    .ring_table
+                    .as_ref()
+                    .is_none_or(|t| t.e != sensor.elevations_deg)
+                {
+                    self.ring_table = RingTable::new(sensor);
+                }
+                let (x, y, z) = (&self.x, &self.y, &self.z);
+                let elevation = |i: usize| z[i].atan2((x[i] * x[i] + y[i] * y[i]).sqrt());
+                match &self.ring_table {
+                    Some(t) => ring.extend((0..n).map(|i| t.ring_of_elevation(elevation(i)))),
+                    None => ring.extend((0..n).map(|i| sensor.ring_of_elevation(elevation(i)))),
+                }
                 self.ring_derived = true;
             }
             self.ring = Some(ring);
@@ -130,11 +140,12 @@ impl Points {
 
 /// [`SensorModel::ring_of_elevation`] with the binary search replaced by a table lookup and a
 /// short linear step, giving the same ring for every input: the search's branches are
-/// unpredictable and cost more than the rest of deriving a ring.
-struct RingTable<'a> {
-    sensor: &'a SensorModel,
-    /// Elevations in degrees (ascending).
-    e: &'a [f32],
+/// unpredictable and cost more than the rest of deriving a ring. Built once per sensor model and
+/// kept by [`Points`] between frames.
+#[derive(Clone, Debug)]
+struct RingTable {
+    /// The sensor's elevations in degrees (ascending).
+    e: Vec<f32>,
     /// `start[b]`: how many elevations lie below the lower edge of bin `b - 1` (a lower bound of
     /// the count below any angle in bin `b`).
     start: Vec<u16>,
@@ -142,26 +153,19 @@ struct RingTable<'a> {
     inv_step: f32,
 }
 
-impl<'a> RingTable<'a> {
+impl RingTable {
     /// Bin width, degrees: a fraction of the finest spacing of any sensor's beams.
     const STEP_DEG: f32 = 0.05;
 
-    fn new(sensor: &'a SensorModel) -> Self {
+    /// The table of `sensor`, or `None` for an unusual elevation list (not strictly ascending,
+    /// not finite, empty or huge), whose rings the search itself derives.
+    fn new(sensor: &SensorModel) -> Option<Self> {
         let e = &sensor.elevations_deg[..];
         let ascending = e.windows(2).all(|w| w[0] < w[1]) && e.iter().all(|v| v.is_finite());
-        let (lo, hi) = match (e.first(), e.last()) {
-            (Some(&lo), Some(&hi)) if ascending && e.len() < 65_536 => (lo, hi),
-            // Anything unusual: the search itself (no table).
-            _ => {
-                return RingTable {
-                    sensor,
-                    e,
-                    start: Vec::new(),
-                    lo: 0.0,
-                    inv_step: 0.0,
-                };
-            }
-        };
+        let (&lo, &hi) = (e.first()?, e.last()?);
+        if !ascending || e.len() >= 65_536 {
+            return None;
+        }
         let bins = ((hi - lo) / Self::STEP_DEG) as usize + 2;
         let start = (0..bins)
             .map(|b| {
@@ -169,22 +173,18 @@ impl<'a> RingTable<'a> {
                 e.partition_point(|&v| v < edge) as u16
             })
             .collect();
-        RingTable {
-            sensor,
-            e,
+        Some(RingTable {
+            e: e.to_vec(),
             start,
             lo,
             inv_step: 1.0 / Self::STEP_DEG,
-        }
+        })
     }
 
     #[inline]
     fn ring_of_elevation(&self, elevation: f32) -> u16 {
-        if self.start.is_empty() {
-            return self.sensor.ring_of_elevation(elevation);
-        }
         let deg = elevation.to_degrees();
-        let e = self.e;
+        let e = &self.e[..];
         // `i` = how many elevations lie below `deg` (the search's partition point): from the
         // table's lower bound, step up.
         let mut i = if deg >= self.lo {
@@ -412,8 +412,7 @@ mod tests {
             SensorModel::hdl64e(),
             SensorModel::nuscenes(),
         ] {
-            let t = RingTable::new(&m);
-            assert!(!t.start.is_empty(), "{}", m.name);
+            let t = RingTable::new(&m).expect("a table for every built-in model");
             let mut deg = -40.0f32;
             let mut all: Vec<f32> = Vec::new();
             while deg < 40.0 {

@@ -47,3 +47,42 @@ pub fn kitti_scan(test: &str, idx: u32) -> Option<Cloud> {
         kitti::decode_kitti(&std::fs::read(&p).expect("read KITTI bin")).expect("decode KITTI bin"),
     )
 }
+
+/// One module per catalogue entry of `$modality`, named after its ID (`c_a1`, `l_b3`), holding a
+/// `#[test]` per property function of `$tests` (each `fn(&Entry)` in the calling file): `cargo
+/// test -p perturb-core c_a1` checks one perturbation, and a failure in one entry does not hide
+/// the others. A further test checks the entries listed are the catalogue's, in its order, so a
+/// new perturbation needs its line.
+#[allow(unused_macros)]
+macro_rules! per_entry {
+    ($modality:expr, $tests:tt, { $($module:ident => $id:literal),* $(,)? }) => {
+        $( per_entry_module!($module, $id, $tests); )*
+
+        #[test]
+        fn every_entry_has_its_tests() {
+            let listed = [$($id),*];
+            let catalogue: Vec<&str> = perturb_core::registry::of_modality($modality)
+                .map(|e| e.id)
+                .collect();
+            assert_eq!(listed.to_vec(), catalogue);
+        }
+    };
+}
+
+/// The module of one entry (see [`per_entry`]).
+#[allow(unused_macros)]
+macro_rules! per_entry_module {
+    ($module:ident, $id:literal, [$($test:ident),* $(,)?]) => {
+        mod $module {
+            fn entry() -> &'static perturb_core::registry::Entry {
+                perturb_core::find($id).expect("in the catalogue")
+            }
+            $(
+                #[test]
+                fn $test() {
+                    super::$test(entry());
+                }
+            )*
+        }
+    };
+}
