@@ -1,0 +1,21 @@
+//! Building blocks shared by the camera perturbations: row-parallel iteration with deterministic
+//! per-row random streams, per-channel lookup tables, Gaussian kernels and separable convolution.
+
+mod buffers;
+mod channels;
+mod filter;
+mod float_image;
+mod gaussian;
+mod hsv;
+mod rows;
+mod simd;
+
+pub use buffers::*;
+pub use channels::*;
+pub use filter::*;
+pub use float_image::*;
+pub use gaussian::*;
+pub use hsv::*;
+pub use rows::*;
+pub(crate) use simd::wide_fn;
+pub use simd::*;

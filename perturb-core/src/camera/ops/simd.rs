@@ -1,0 +1,71 @@
+//! Runtime dispatch to an AVX2 copy of per-row kernels (`wide_fn!`), with a switch that forces
+//! the baseline copy for tests and benchmarks.
+
+/// Whether the functions defined with `wide_fn!` run their AVX2 copy: on x86-64 CPUs that have
+/// AVX2, FMA, BMI1, BMI2 and LZCNT (the x86-64-v3 level, every x86-64 CPU since about 2015),
+/// unless [`force_baseline`] is on. The check is a few cached loads.
+#[inline]
+pub fn wide_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        !BASELINE_ONLY.load(std::sync::atomic::Ordering::Relaxed)
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("lzcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// When set, [`wide_available`] is false.
+static BASELINE_ONLY: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Makes the `wide_fn!` functions run their baseline copy only (`true`) or the widest the CPU
+/// has (`false`, the default), on every thread: for tests and benchmarks that compare the two.
+pub fn force_baseline(on: bool) {
+    BASELINE_ONLY.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Defines a function whose body is compiled twice, for the build's baseline target and for
+/// AVX2 (with FMA, BMI1, BMI2 and LZCNT), and runs the copy this CPU can run
+/// ([`wide_available`]). The AVX2 copy's inner loops work on eight floats or 32-bit integers at a
+/// time instead of four (the baseline, `x86-64-v2`, has 128-bit vectors only). Both copies compute
+/// the same values: Rust never fuses a multiply and an add by itself or reorders float
+/// arithmetic, so wider instructions change only how many lanes run at once; a test compares the
+/// two paths on every camera perturbation. Calling the AVX2 copy is the crate's one `unsafe`
+/// operation, sound because the features are checked first.
+///
+/// Meant for kernels that run per row or per band (the check is a few cached loads per call).
+/// Functions the body calls get the wider code only where they are inlined into it. Closures in
+/// the body are compiled for AVX2 too, so library code that calls them without being inlined
+/// (`collect`, `for_each` on long adapter chains) cannot inline them back and calls them once
+/// per element: write such loops as `for` loops over slices. Const generic parameters are
+/// supported, type parameters are not.
+macro_rules! wide_fn {
+    (
+        $(#[$meta:meta])*
+        $vis:vis fn $name:ident $(<$(const $cg:ident: $ct:ty),+>)?
+            ($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block
+    ) => {
+        $(#[$meta])*
+        $vis fn $name $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt")]
+            fn wide $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? $body
+            #[inline(always)]
+            fn base $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? $body
+            #[cfg(target_arch = "x86_64")]
+            if $crate::camera::ops::wide_available() {
+                // SAFETY: the CPU has every feature the copy is compiled for (`wide_available`
+                // checked), which is all such a function needs.
+                return unsafe { wide $(::<$($cg),+>)? ($($arg),*) };
+            }
+            base $(::<$($cg),+>)? ($($arg),*)
+        }
+    };
+}
+pub(crate) use wide_fn;
