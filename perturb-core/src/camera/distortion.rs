@@ -588,19 +588,11 @@ fn box_sums(col: &[i16], out: &mut [i16], c: usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::CameraSetup;
+
     use crate::image::{Image, PixelFormat};
 
     fn run(b: CameraBuilder, sev: u8, img: &Image, seq: u64) -> Image {
-        let p = b(&CameraSetup {
-            severity: sev,
-            seed: 1,
-            geometry: img.geometry(),
-        })
-        .unwrap();
-        let mut out = Image::with_geometry(img.geometry());
-        p.apply(&img.view(), &mut out.view_mut(), seq);
-        out
+        crate::camera::apply_once(b, sev, 1, img, seq)
     }
 
     #[test]

@@ -48,3 +48,24 @@ pub trait CameraPerturbation: Send + Sync {
 
 /// A camera constructor as stored in the registry.
 pub type CameraBuilder = fn(&CameraSetup) -> Result<Box<dyn CameraPerturbation>>;
+
+/// Builds `builder` at `severity` with `seed` for `img`'s geometry and applies it once to frame
+/// `seq`: the camera unit tests' way of running a perturbation.
+#[cfg(test)]
+pub(crate) fn apply_once(
+    builder: CameraBuilder,
+    severity: u8,
+    seed: u64,
+    img: &crate::image::Image,
+    seq: u64,
+) -> crate::image::Image {
+    let setup = CameraSetup {
+        severity,
+        seed,
+        geometry: img.geometry(),
+    };
+    let p = builder(&setup).expect("the perturbation builds");
+    let mut out = crate::image::Image::with_geometry(img.geometry());
+    p.apply(&img.view(), &mut out.view_mut(), seq);
+    out
+}

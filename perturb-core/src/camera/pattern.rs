@@ -501,19 +501,11 @@ impl CameraPerturbation for ObjectOverlay {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::CameraSetup;
+
     use crate::image::{Image, PixelFormat};
 
     fn run(b: CameraBuilder, sev: u8, img: &Image, seq: u64) -> Image {
-        let p = b(&CameraSetup {
-            severity: sev,
-            seed: 9,
-            geometry: img.geometry(),
-        })
-        .unwrap();
-        let mut out = Image::with_geometry(img.geometry());
-        p.apply(&img.view(), &mut out.view_mut(), seq);
-        out
+        crate::camera::apply_once(b, sev, 9, img, seq)
     }
 
     fn bright(w: u32, h: u32) -> Image {

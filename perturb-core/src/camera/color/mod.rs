@@ -28,15 +28,7 @@ mod tests {
     use crate::image::{Image, PixelFormat};
 
     fn run(b: CameraBuilder, sev: u8, img: &Image) -> Image {
-        let p = b(&CameraSetup {
-            severity: sev,
-            seed: 1,
-            geometry: img.geometry(),
-        })
-        .unwrap();
-        let mut out = Image::with_geometry(img.geometry());
-        p.apply(&img.view(), &mut out.view_mut(), 0);
-        out
+        crate::camera::apply_once(b, sev, 1, img, 0)
     }
 
     fn px(r: u8, g: u8, b: u8) -> Image {

@@ -57,19 +57,11 @@ fn copy_frame(input: &ImageView<'_>, output: &mut ImageViewMut<'_>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::{CameraBuilder, CameraSetup};
+    use crate::camera::CameraBuilder;
     use crate::image::{Image, PixelFormat};
 
     fn run(b: CameraBuilder, sev: u8, img: &Image) -> Image {
-        let p = b(&CameraSetup {
-            severity: sev,
-            seed: 1,
-            geometry: img.geometry(),
-        })
-        .unwrap();
-        let mut out = Image::with_geometry(img.geometry());
-        p.apply(&img.view(), &mut out.view_mut(), 0);
-        out
+        crate::camera::apply_once(b, sev, 1, img, 0)
     }
 
     #[test]
@@ -85,15 +77,7 @@ mod tests {
     }
 
     fn run_seq(b: CameraBuilder, sev: u8, img: &Image, seq: u64) -> Image {
-        let p = b(&CameraSetup {
-            severity: sev,
-            seed: 3,
-            geometry: img.geometry(),
-        })
-        .unwrap();
-        let mut out = Image::with_geometry(img.geometry());
-        p.apply(&img.view(), &mut out.view_mut(), seq);
-        out
+        crate::camera::apply_once(b, sev, 3, img, seq)
     }
 
     #[test]

@@ -1,282 +1,11 @@
-//! Noise family (C-A): sensor noise and compression artefacts added to the pixel values.
-//!
-//! The random noises (gaussian, poisson, speckle) draw, for every colour byte, a value from the
-//! distribution of the reference's output given that byte's input value. The distributions are
-//! tabulated at configuration time as quantile tables (inverse CDFs), so a frame costs one random
-//! draw and one table read per byte, whatever the distribution.
+//! C-A4 JPEG compression: the lossy part of baseline JPEG as libjpeg computes it.
 
-#[cfg(test)]
-use super::CameraSetup;
-use super::ops::{
+use crate::camera::ops::{
     byte, copy_alpha, frame_buffer, frame_buffer_overwritten, merge_rgb, par_rows, recycle,
-    row_rng, split_rgb, wide_fn,
+    split_rgb, wide_fn,
 };
-use super::{CameraBuilder, CameraPerturbation};
+use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
-use crate::rng::{Rng, normal_quantile};
-
-/// Resolution of the per-value quantile tables: 2^QBITS equiprobable quantiles.
-const QBITS: u32 = 11;
-const QN: usize = 1 << QBITS;
-
-/// For each input byte value, `QN` equiprobable output values (the midpoints of the quantile
-/// bins of the output distribution).
-struct QuantileTables(Box<[[u8; QN]; 256]>);
-
-impl QuantileTables {
-    /// Builds the tables from `quantile(v, p)`: the output value for input `v` at probability `p`.
-    fn build(quantile: impl Fn(u8, f64) -> f64) -> Self {
-        Self::build_indexed(|v, k| quantile(v, (k as f64 + 0.5) / QN as f64))
-    }
-
-    /// Builds the tables from `f(v, k)`: the output value for input `v` in quantile bin `k`.
-    fn build_indexed(f: impl Fn(u8, usize) -> f64) -> Self {
-        let mut t = vec![[0u8; QN]; 256].into_boxed_slice();
-        for (v, row) in t.iter_mut().enumerate() {
-            for (k, out) in row.iter_mut().enumerate() {
-                *out = f(v as u8, k).round().clamp(0.0, 255.0) as u8;
-            }
-        }
-        QuantileTables(t.try_into().expect("256 rows"))
-    }
-
-    /// Applies the tables to every colour byte, one independent draw per byte; alpha is copied.
-    fn apply(
-        &self,
-        seed: u64,
-        salt: u64,
-        input: &ImageView<'_>,
-        output: &mut ImageViewMut<'_>,
-        seq: u64,
-    ) {
-        let format = input.format;
-        let t = &self.0;
-        par_rows(input, output, |y, src, dst| {
-            let rng = row_rng(seed, seq, salt, y);
-            table_row(t, rng, format.alpha_offset(), src, dst);
-        });
-    }
-}
-
-wide_fn! {
-    /// One row of [`QuantileTables::apply`]: each colour byte `v` becomes `t[v][k]` for the next
-    /// draw `k` of `rng`; the alpha byte (at `alpha` in 4-byte pixels) is copied.
-    fn table_row(
-        t: &[[u8; QN]; 256],
-        rng: Rng,
-        alpha: Option<usize>,
-        src: &[u8],
-        dst: &mut [u8],
-    ) {
-        let mut rng = rng;
-        let mut draw = Draws::default();
-        match alpha {
-            None => {
-                for (s, d) in src.iter().zip(dst.iter_mut()) {
-                    *d = t[*s as usize][draw.next(&mut rng)];
-                }
-            }
-            Some(a) => {
-                for (s, d) in src.chunks_exact(4).zip(dst.chunks_exact_mut(4)) {
-                    for c in 0..4 {
-                        d[c] = if c == a {
-                            s[c]
-                        } else {
-                            t[s[c] as usize][draw.next(&mut rng)]
-                        };
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// Standard normal quantiles at the centres of the `QN` equiprobable bins.
-fn normal_bins() -> Vec<f64> {
-    (0..QN)
-        .map(|k| normal_quantile((k as f64 + 0.5) / QN as f64))
-        .collect()
-}
-
-/// Hands out `QBITS`-bit random indices, five per 64-bit draw.
-#[derive(Default)]
-struct Draws {
-    bits: u64,
-    left: u32,
-}
-
-impl Draws {
-    #[inline]
-    fn next(&mut self, rng: &mut Rng) -> usize {
-        if self.left == 0 {
-            self.bits = rng.next_u64();
-            self.left = 64 / QBITS;
-        }
-        let v = (self.bits & (QN as u64 - 1)) as usize;
-        self.bits >>= QBITS;
-        self.left -= 1;
-        v
-    }
-}
-
-/// C-A1 gaussian_noise: standard deviation of the additive noise, in units of full scale (0..1),
-/// severities 1..5 (PerturbationDrive `gaussian_noise`).
-pub const GAUSSIAN_SIGMA: [f64; 5] = [0.03, 0.06, 0.12, 0.18, 0.22];
-
-/// C-A1 gaussian_noise: `out = clip(x + N(0, sigma))` on every colour channel independently.
-///
-/// Tabulated as described in the module: for input value `v` the output is
-/// `clip(round(v + 255 sigma z))`. The result is rounded where the reference's uint8 conversion
-/// truncates (a -0.5 level bias the project does not copy). Alpha is copied.
-pub struct GaussianNoise {
-    seed: u64,
-    tables: QuantileTables,
-}
-
-/// Registry constructor of C-A1.
-pub const GAUSSIAN: CameraBuilder = |s| {
-    let sigma = GAUSSIAN_SIGMA[s.level()] * 255.0;
-    Ok(Box::new(GaussianNoise {
-        seed: s.seed,
-        tables: {
-            let z = normal_bins();
-            QuantileTables::build_indexed(|v, k| v as f64 + sigma * z[k])
-        },
-    }))
-};
-
-impl CameraPerturbation for GaussianNoise {
-    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        self.tables.apply(self.seed, 0xA1, input, output, seq);
-    }
-}
-
-/// C-A2 poisson_noise: photon count scale lambda, severities 1..5 (PerturbationDrive
-/// `poisson_noise`): lower lambda, fewer photons, stronger noise.
-pub const POISSON_LAMBDA: [f64; 5] = [120.0, 105.0, 87.0, 55.0, 30.0];
-
-/// C-A2 poisson_noise: `out = clip(Poisson(x lambda) / lambda)` with x = v / 255, per colour byte.
-///
-/// For each of the 256 input values the Poisson law of mean `v lambda / 255` is tabulated at
-/// configuration time as a quantile table (the reference draws a float64 Poisson variate per
-/// element, 60 ms at 640x480 in Python). Output rounded to the nearest level.
-pub struct PoissonNoise {
-    seed: u64,
-    tables: QuantileTables,
-}
-
-fn poisson_quantile(mean: f64, p: f64) -> f64 {
-    if mean <= 0.0 {
-        return 0.0;
-    }
-    // Sequential search of the CDF from 0; means are at most 120 here.
-    let mut k = 0.0;
-    let mut pmf = (-mean).exp();
-    let mut cdf = pmf;
-    while cdf < p && k < 10_000.0 {
-        k += 1.0;
-        pmf *= mean / k;
-        cdf += pmf;
-    }
-    k
-}
-
-/// Registry constructor of C-A2.
-pub const POISSON: CameraBuilder = |s| {
-    let lambda = POISSON_LAMBDA[s.level()];
-    Ok(Box::new(PoissonNoise {
-        seed: s.seed,
-        tables: QuantileTables::build(|v, p| {
-            poisson_quantile(v as f64 / 255.0 * lambda, p) / lambda * 255.0
-        }),
-    }))
-};
-
-impl CameraPerturbation for PoissonNoise {
-    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        self.tables.apply(self.seed, 0xA2, input, output, seq);
-    }
-}
-
-/// C-A5 speckle_noise: standard deviation of the multiplicative noise, severities 1..5
-/// (PerturbationDrive `speckle_noise_filter`).
-pub const SPECKLE_SIGMA: [f64; 5] = [0.02, 0.05, 0.09, 0.14, 0.20];
-
-/// C-A5 speckle_noise: `out = clip(I N(1, sigma))` per colour byte (multiplicative Gaussian noise:
-/// dark pixels stay dark, bright ones scatter most), tabulated per input value.
-pub struct SpeckleNoise {
-    seed: u64,
-    tables: QuantileTables,
-}
-
-/// Registry constructor of C-A5.
-pub const SPECKLE: CameraBuilder = |s| {
-    let sigma = SPECKLE_SIGMA[s.level()];
-    Ok(Box::new(SpeckleNoise {
-        seed: s.seed,
-        tables: {
-            let z = normal_bins();
-            QuantileTables::build_indexed(|v, k| v as f64 * (1.0 + sigma * z[k]))
-        },
-    }))
-};
-
-impl CameraPerturbation for SpeckleNoise {
-    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        self.tables.apply(self.seed, 0xA5, input, output, seq);
-    }
-}
-
-/// C-A3 impulse_noise: fraction p of the colour elements hit, severities 1..5 (PerturbationDrive
-/// `impulse_noise`); half become salt (255), half pepper (0).
-pub const IMPULSE_AMOUNT: [f64; 5] = [0.01, 0.02, 0.04, 0.065, 0.10];
-
-/// C-A3 impulse_noise: `n = ceil(p H W C / 2)` element coordinates set to 255, then `n` set to 0
-/// (C = colour channels), drawn uniformly with replacement, so later draws may overwrite earlier
-/// ones as in the reference.
-///
-/// Deviation: the reference draws each index with an exclusive upper bound of `dim - 1`, so the
-/// last row, the last column and the third channel are never hit; here every element can be.
-pub struct ImpulseNoise {
-    seed: u64,
-    amount: f64,
-}
-
-/// Registry constructor of C-A3.
-pub const IMPULSE: CameraBuilder = |s| {
-    Ok(Box::new(ImpulseNoise {
-        seed: s.seed,
-        amount: IMPULSE_AMOUNT[s.level()],
-    }))
-};
-
-impl ImpulseNoise {
-    /// Number of salt (and of pepper) draws for a frame.
-    pub fn draws(&self, width: u32, height: u32, format: PixelFormat) -> usize {
-        (self.amount * width as f64 * height as f64 * format.color_channels() as f64 / 2.0).ceil()
-            as usize
-    }
-}
-
-impl CameraPerturbation for ImpulseNoise {
-    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        par_rows(input, output, |_, s, d| d.copy_from_slice(s));
-        let (w, h, f) = (input.width as u64, input.height as u64, input.format);
-        let cc = f.color_channels() as u64;
-        let offsets = f.rgb_offsets();
-        let n = self.draws(input.width, input.height, f);
-        let mut rng = Rng::for_frame(self.seed, seq, 0xA3);
-        for (value, _) in [(255u8, 0), (0u8, 1)] {
-            for _ in 0..n {
-                let e = rng.below(w * h * cc);
-                let (pix, ch) = (e / cc, (e % cc) as usize);
-                let (y, x) = ((pix / w) as usize, (pix % w) as usize);
-                let row = output.row_mut(y);
-                row[x * f.channels() + offsets[ch]] = value;
-            }
-        }
-    }
-}
 
 /// C-A4 jpeg_compression: JPEG quality, severities 1..5 (PerturbationDrive `jpeg_filter`, which
 /// round-trips through OpenCV's libjpeg).
@@ -827,101 +556,7 @@ impl CameraPerturbation for JpegCompression {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::Image;
-
-    fn flat(v: u8, w: u32, h: u32) -> Image {
-        let mut img = Image::new(w, h, PixelFormat::Rgb8);
-        img.data.fill(v);
-        img
-    }
-
-    fn stats(img: &Image) -> (f64, f64) {
-        let n = img.data.len() as f64;
-        let m = img.data.iter().map(|&v| v as f64).sum::<f64>() / n;
-        let var = img
-            .data
-            .iter()
-            .map(|&v| (v as f64 - m).powi(2))
-            .sum::<f64>()
-            / n;
-        (m, var.sqrt())
-    }
-
-    fn run(b: CameraBuilder, sev: u8, img: &Image, seq: u64) -> Image {
-        let p = b(&CameraSetup {
-            severity: sev,
-            seed: 5,
-            geometry: img.geometry(),
-        })
-        .unwrap();
-        let mut out = Image::with_geometry(img.geometry());
-        p.apply(&img.view(), &mut out.view_mut(), seq);
-        out
-    }
-
-    #[test]
-    fn gaussian_noise_has_the_configured_sigma() {
-        let img = flat(128, 300, 200);
-        for s in 1..=5u8 {
-            let (m, sd) = stats(&run(GAUSSIAN, s, &img, 0));
-            let want = GAUSSIAN_SIGMA[s as usize - 1] * 255.0;
-            assert!((m - 128.0).abs() < 0.3, "s{s} mean {m}");
-            // Clipping at 0/255 shrinks the tails slightly at the top severities.
-            assert!((sd - want).abs() / want < 0.03, "s{s} sd {sd} want {want}");
-        }
-    }
-
-    #[test]
-    fn poisson_noise_variance_follows_the_photon_count() {
-        // Var(k / lambda * 255) = 255^2 x / lambda for k ~ Poisson(x lambda).
-        let img = flat(100, 300, 200);
-        for s in 1..=5u8 {
-            let lambda = POISSON_LAMBDA[s as usize - 1];
-            let (m, sd) = stats(&run(POISSON, s, &img, 0));
-            let want = 255.0 * (100.0 / 255.0 / lambda).sqrt();
-            assert!((m - 100.0).abs() < 1.0, "s{s} mean {m}");
-            assert!((sd - want).abs() / want < 0.05, "s{s} sd {sd} want {want}");
-        }
-    }
-
-    #[test]
-    fn speckle_noise_is_multiplicative() {
-        // 100 x (1 + 0.2 z) stays inside 0..255 for |z| < 7, so no clipping distorts the spread.
-        let bright = run(SPECKLE, 5, &flat(100, 200, 100), 0);
-        let dark = run(SPECKLE, 5, &flat(20, 200, 100), 0);
-        let (_, sb) = stats(&bright);
-        let (_, sd) = stats(&dark);
-        assert!((sb - 100.0 * 0.2).abs() < 1.0, "{sb}");
-        assert!((sd - 20.0 * 0.2).abs() < 0.6, "{sd}");
-    }
-
-    #[test]
-    fn impulse_noise_hits_the_configured_count_everywhere() {
-        let img = flat(128, 101, 67);
-        for s in 1..=5u8 {
-            let out = run(IMPULSE, s, &img, 3);
-            let p = IMPULSE_AMOUNT[s as usize - 1];
-            let n = (p * 101.0 * 67.0 * 3.0 / 2.0).ceil();
-            let salt = out.data.iter().filter(|&&v| v == 255).count() as f64;
-            let pepper = out.data.iter().filter(|&&v| v == 0).count() as f64;
-            // Draws with replacement collide (and pepper overwrites salt) a little.
-            let total = 101.0 * 67.0 * 3.0;
-            assert!(
-                salt <= n && salt > n * (1.0 - 2.0 * n / total) - 10.0,
-                "s{s} salt {salt} of {n}"
-            );
-            assert!(
-                pepper <= n && pepper > n * (1.0 - n / total) - 10.0,
-                "s{s} pepper {pepper} of {n}"
-            );
-        }
-        // The reference's blind spots (last row, last column, third channel) are hit here.
-        let out = run(IMPULSE, 5, &img, 1);
-        let last_row = out.view().row(66).iter().any(|&v| v != 128);
-        let last_col = (0..67).any(|y| out.view().row(y)[100 * 3..].iter().any(|&v| v != 128));
-        let blue = out.data.chunks_exact(3).any(|p| p[2] != 128);
-        assert!(last_row && last_col && blue);
-    }
+    use crate::image::{Image, PixelFormat};
 
     #[test]
     fn the_shuffle_transpose_is_a_transpose() {
@@ -946,8 +581,8 @@ mod tests {
         for (i, v) in ramp.data.iter_mut().enumerate() {
             *v = ((i % 64) * 3) as u8;
         }
-        let low = run(JPEG, 5, &ramp, 0);
-        let high = run(JPEG, 1, &ramp, 0);
+        let low = crate::camera::apply_once(JPEG, 5, 5, &ramp, 0);
+        let high = crate::camera::apply_once(JPEG, 1, 5, &ramp, 0);
         let err = |o: &Image| {
             o.data
                 .iter()
@@ -962,9 +597,15 @@ mod tests {
         // A flat image stays flat; its level moves by at most the DC quantisation step / 8, as in
         // libjpeg: at quality 5 the DC step is 160, so 77 (-51 after the level shift, DC -408)
         // becomes round(-408 / 160) x 160 / 8 + 128 = 68.
-        let flat_img = flat(77, 24, 24);
-        let out = run(JPEG, 5, &flat_img, 0);
+        let mut flat_img = Image::new(24, 24, PixelFormat::Rgb8);
+        flat_img.data.fill(77);
+        let out = crate::camera::apply_once(JPEG, 5, 5, &flat_img, 0);
         assert!(out.data.iter().all(|&v| v == 68), "{:?}", &out.data[..6]);
-        assert!(run(JPEG, 1, &flat_img, 0).data.iter().all(|&v| v == 77));
+        assert!(
+            crate::camera::apply_once(JPEG, 1, 5, &flat_img, 0)
+                .data
+                .iter()
+                .all(|&v| v == 77)
+        );
     }
 }
