@@ -8,7 +8,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use perturb_benches::{kitti_scan, single_thread, vlp32c_sized_scan};
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::registry::{Modality, of_modality};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 use std::time::Duration;
 
 fn bench(c: &mut Criterion) {

@@ -4,7 +4,7 @@
 
 use crate::perturbation::{self, Active};
 use perturb_core::registry::Modality;
-use perturb_core::sensors::{Axes, Axis, SensorModel};
+use perturb_core::sensor_model::{Axes, Axis, SensorModel};
 use perturb_wire::{StreamQos, TransportOptions, names};
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;

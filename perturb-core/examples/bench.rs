@@ -13,7 +13,7 @@ use perturb_core::bench::{Timing, time_camera, time_lidar};
 use perturb_core::formats::{kitti, picture};
 use perturb_core::image::resize_bilinear;
 use perturb_core::registry::{Modality, of_modality};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 use std::path::PathBuf;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -7,7 +7,7 @@ use crate::error::Result;
 use crate::image::ImageView;
 use crate::perturber::{CameraPerturber, LidarPerturber};
 use crate::registry::Entry;
-use crate::sensors::SensorModel;
+use crate::sensor_model::SensorModel;
 use std::time::{Duration, Instant};
 
 /// Latency statistics of one perturbation at one severity.

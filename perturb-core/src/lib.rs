@@ -23,7 +23,7 @@ pub mod percentile;
 pub mod perturber;
 pub mod registry;
 pub mod rng;
-pub mod sensors;
+pub mod sensor_model;
 pub mod synthetic;
 pub mod viz;
 

@@ -23,7 +23,7 @@ use crate::image::{Image, ImageGeometry, ImageView, ImageViewMut};
 use crate::lidar::points::CloudShape;
 use crate::lidar::{Box3, LidarFrame, LidarPerturbation, LidarSetup, Plan, Points};
 use crate::registry::{self, Builder, Entry, Modality};
-use crate::sensors::SensorModel;
+use crate::sensor_model::SensorModel;
 
 /// Which perturbation, how strong, and the seed: everything that determines the output besides the
 /// input and the sequence number.

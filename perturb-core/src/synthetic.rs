@@ -17,7 +17,7 @@
 use crate::cloud::{Cloud, Datatype, PointField, PointLayout};
 use crate::image::{Image, PixelFormat};
 use crate::rng::mix64;
-use crate::sensors::VLP32C_ELEVATIONS;
+use crate::sensor_model::VLP32C_ELEVATIONS;
 use rayon::prelude::*;
 use std::sync::Arc;
 

@@ -11,7 +11,7 @@ use perturb_core::perturber::LidarPerturber;
 use perturb_core::registry::{Entry, Modality};
 
 use perturb_core::rng::Rng;
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 
 /// A point layout as awkward as real drivers make them: big-endian, unaligned, a float64 z, a
 /// uint16 ring and a float64 time at offset 18 of a 26-byte point... plus a uint8 intensity.

@@ -10,7 +10,7 @@ use perturb_core::detector::{Detection, Detector, DetectorConfig, ObjectClass};
 use perturb_core::formats::kitti;
 use perturb_core::formats::kitti_labels::{KittiCalib, KittiObject, parse_labels};
 use perturb_core::lidar::{Box3, Points};
-use perturb_core::sensors::{Axes, Axis, SensorModel};
+use perturb_core::sensor_model::{Axes, Axis, SensorModel};
 use std::path::Path;
 
 /// Match radius in the ground plane, metres.

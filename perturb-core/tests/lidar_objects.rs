@@ -11,7 +11,7 @@ use perturb_core::detector::{Detector, DetectorConfig};
 use perturb_core::lidar::{Box3, Points};
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::rng::Rng;
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 
 /// x, y, z, intensity (float32) and a uint32 tag holding the input index of each point.
 fn tagged_layout() -> PointLayout {

@@ -10,7 +10,7 @@ use perturb_core::cloud::{Cloud, Datatype, PointField, PointLayout, names};
 use perturb_core::formats::{kitti, pcd};
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::registry::{Modality, of_modality};
-use perturb_core::sensors::{Axes, Axis, SensorModel};
+use perturb_core::sensor_model::{Axes, Axis, SensorModel};
 use rayon::prelude::*;
 use std::path::Path;
 use std::sync::Arc;

@@ -7,7 +7,7 @@ use perturb_core::cloud::{Cloud, PointLayout};
 use perturb_core::lidar::Points;
 use perturb_core::lidar::motion::MISALIGNMENT_LEVELS;
 use perturb_core::perturber::LidarPerturber;
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 
 fn run(id: &str, s: u8, cloud: &Cloud, seq: u64, sensor: &SensorModel) -> Cloud {
     LidarPerturber::new(id, s, 3, sensor.clone())

@@ -13,7 +13,7 @@ use perturb_core::lidar::{Box3, Points};
 use perturb_core::metrics::{DetectionMetrics, MatchConfig, detection_metrics};
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::rng::Rng;
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 
 #[test]
 #[ignore = "prints how much of KITTI 000000 the Hahner fog (L-A7) returns from its surface"]

@@ -17,7 +17,7 @@ use perturb_core::cloud::Cloud;
 use perturb_core::image::{Image, PixelFormat, resize_bilinear};
 use perturb_core::perturber::{CameraPerturber, LidarPerturber};
 use perturb_core::registry::{Modality, of_modality};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 

@@ -4,7 +4,7 @@ use anyhow::{Context, Result};
 use perturb_core::formats::FileKind;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber};
 use perturb_core::registry::{Modality, of_modality};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 use perturb_core::synthetic::{street_image, vlp32c_scan};
 use perturb_study::files::{save_cloud, save_image};
 use std::path::Path;

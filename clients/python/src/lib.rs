@@ -27,7 +27,7 @@ use perturb_core::image::{Image, ImageView, ImageViewMut, PixelFormat};
 use perturb_core::lidar::Points;
 use perturb_core::perturber::{self as core, Spec};
 use perturb_core::registry::{self, CATALOGUE, Modality};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 use perturb_study::batch::{self, BatchOptions, FileWorker, Selection, Set, Shard};
 use perturb_study::dataset::Dataset;
 use pyo3::create_exception;

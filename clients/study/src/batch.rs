@@ -13,7 +13,7 @@ use crate::progress::Progress;
 use perturb_bag::Bag;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber, Spec};
 use perturb_core::registry::{CATALOGUE, Entry, Modality, find};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 

@@ -4,7 +4,7 @@ use crate::error::{Result, StudyError};
 use perturb_core::cloud::{Cloud, CloudView};
 use perturb_core::formats::{FileKind, kitti, pcd, picture};
 use perturb_core::image::{Image, ImageView};
-use perturb_core::sensors::{Axes, Axis, SensorModel};
+use perturb_core::sensor_model::{Axes, Axis, SensorModel};
 use std::path::Path;
 
 /// A decoded input file.

@@ -23,7 +23,7 @@ use perturb_core::metrics::{
     DetectionMetrics, LidarSummary, MatchConfig, detection_metrics, summarize_lidar,
 };
 use perturb_core::registry::{CATALOGUE, Entry, Modality};
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::ops::ControlFlow;

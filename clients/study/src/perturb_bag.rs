@@ -10,7 +10,7 @@ use perturb_core::formats::ros::{CompressedImageMsg, Header, ImageMsg, PointClou
 use perturb_core::image::Image;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber, Spec};
 use perturb_core::registry::Modality;
-use perturb_core::sensors::SensorModel;
+use perturb_core::sensor_model::SensorModel;
 use std::collections::HashMap;
 use std::ops::ControlFlow;
 use std::path::Path;

@@ -21,7 +21,7 @@ pub mod weather;
 pub use points::{Plan, Points};
 
 use crate::error::Result;
-use crate::sensors::SensorModel;
+use crate::sensor_model::SensorModel;
 
 /// What a LiDAR perturbation is configured with.
 #[derive(Clone, Debug, PartialEq)]
@@ -75,7 +75,7 @@ impl Box3 {
     }
 
     /// This box (in the canonical frame of `axes`: x forward, z up) in the sensor's frame.
-    pub fn to_sensor(&self, axes: &crate::sensors::Axes) -> Box3 {
+    pub fn to_sensor(&self, axes: &crate::sensor_model::Axes) -> Box3 {
         if axes.is_canonical() {
             return *self;
         }
@@ -87,7 +87,7 @@ impl Box3 {
     }
 
     /// This box (in the sensor's frame) in the canonical frame of `axes`.
-    pub fn to_canonical(&self, axes: &crate::sensors::Axes) -> Box3 {
+    pub fn to_canonical(&self, axes: &crate::sensor_model::Axes) -> Box3 {
         if axes.is_canonical() {
             return *self;
         }

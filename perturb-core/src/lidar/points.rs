@@ -2,7 +2,7 @@
 
 use crate::cloud::{CloudView, FieldReader, names};
 use crate::error::{Error, Result};
-use crate::sensors::{Axes, SensorModel};
+use crate::sensor_model::{Axes, SensorModel};
 use rayon::prelude::*;
 
 /// The fields of a cloud as flat arrays (structure of arrays), in point order.

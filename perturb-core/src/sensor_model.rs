@@ -12,7 +12,7 @@
 //! sensor's own frame, so a cloud's axes never change, whatever the convention.
 //!
 //! ```
-//! use perturb_core::sensors::SensorModel;
+//! use perturb_core::sensor_model::SensorModel;
 //! let vlp = SensorModel::vlp32c();
 //! assert_eq!(vlp.beams(), 32);
 //! assert_eq!(vlp.ring_of_elevation(-25.0f32.to_radians()), 0);
@@ -116,7 +116,7 @@ impl std::fmt::Display for Axis {
 /// into the canonical frame and written back has the same bytes.
 ///
 /// ```
-/// use perturb_core::sensors::{Axes, Axis};
+/// use perturb_core::sensor_model::{Axes, Axis};
 /// let nuscenes = Axes::new(Axis::PosY, Axis::PosZ).unwrap(); // LIDAR_TOP: x right, y forward
 /// assert_eq!(nuscenes.to_canonical([1.0, 10.0, -1.5]), [10.0, -1.0, -1.5]); // 10 m ahead, 1 m right
 /// assert_eq!(nuscenes.to_sensor([10.0, -1.0, -1.5]), [1.0, 10.0, -1.5]);
