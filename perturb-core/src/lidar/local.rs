@@ -36,112 +36,25 @@ impl InBox {
     /// over the boxes' footprints keeps this O(N + boxes) (a few candidate boxes per point at
     /// most), whatever the number of boxes.
     pub fn new(points: &Points, boxes: &[Box3]) -> Self {
-        let n = points.len();
-        let mut box_of = vec![NO_BOX; n];
-        // Footprint bounds of each box (axis-aligned around the rotated rectangle).
-        let fp: Vec<Option<[f32; 4]>> = boxes
-            .iter()
-            .map(|b| {
-                let (s, c) = b.yaw.sin_cos();
-                // A hair larger than the exact footprint, so rounding never drops a point that
-                // `contains` accepts (the exact test follows).
-                let hx = 0.5 * (b.size[0] * c.abs() + b.size[1] * s.abs()) * 1.0001 + 1e-4;
-                let hy = 0.5 * (b.size[0] * s.abs() + b.size[1] * c.abs()) * 1.0001 + 1e-4;
-                let r = [
-                    b.center[0] - hx,
-                    b.center[1] - hy,
-                    b.center[0] + hx,
-                    b.center[1] + hy,
-                ];
-                (r.iter().all(|v| v.is_finite())
-                    && b.size[2].is_finite()
-                    && b.center[2].is_finite())
-                .then_some(r)
-            })
-            .collect();
-        let mut lo = [f32::INFINITY; 2];
-        let mut hi = [f32::NEG_INFINITY; 2];
-        for r in fp.iter().flatten() {
-            lo = [lo[0].min(r[0]), lo[1].min(r[1])];
-            hi = [hi[0].max(r[2]), hi[1].max(r[3])];
-        }
-        if lo[0] <= hi[0] && lo[1] <= hi[1] {
-            // At most 256 x 256 cells, none smaller than 0.5 m.
-            let cell = ((hi[0] - lo[0]).max(hi[1] - lo[1]) / 256.0).max(0.5);
-            let inv = 1.0 / cell;
-            let gx = (((hi[0] - lo[0]) * inv) as usize + 1).min(257);
-            let gy = (((hi[1] - lo[1]) * inv) as usize + 1).min(257);
-            let cell_of = |v: f32, o: f32, g: usize| (((v - o) * inv).max(0.0) as usize).min(g - 1);
-            // Boxes per cell, in box order (CSR).
-            let mut count = vec![0u32; gx * gy + 1];
-            let ranges: Vec<Option<[usize; 4]>> = fp
-                .iter()
-                .map(|r| {
-                    r.map(|r| {
-                        [
-                            cell_of(r[0], lo[0], gx),
-                            cell_of(r[1], lo[1], gy),
-                            cell_of(r[2], lo[0], gx),
-                            cell_of(r[3], lo[1], gy),
-                        ]
-                    })
-                })
-                .collect();
-            for g in ranges.iter().flatten() {
-                for cx in g[0]..=g[2] {
-                    for cy in g[1]..=g[3] {
-                        count[cx * gy + cy + 1] += 1;
-                    }
-                }
-            }
-            for k in 1..count.len() {
-                count[k] += count[k - 1];
-            }
-            let mut cursor = count.clone();
-            let mut list = vec![0u32; count[gx * gy] as usize];
-            for (b, g) in ranges.iter().enumerate() {
-                let Some(g) = g else { continue };
-                for cx in g[0]..=g[2] {
-                    for cy in g[1]..=g[3] {
-                        let slot = &mut cursor[cx * gy + cy];
-                        list[*slot as usize] = b as u32;
-                        *slot += 1;
-                    }
-                }
-            }
+        let mut box_of = vec![NO_BOX; points.len()];
+        if let Some(grid) = BoxGrid::new(boxes) {
             for (i, slot) in box_of.iter_mut().enumerate() {
                 let p = points.xyz(i);
-                if !(p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1]) {
-                    continue;
-                }
-                let c = cell_of(p[0], lo[0], gx) * gy + cell_of(p[1], lo[1], gy);
-                for &b in &list[count[c] as usize..count[c + 1] as usize] {
-                    if boxes[b as usize].contains(p) {
-                        *slot = b;
-                        break;
-                    }
+                if let Some(b) = grid
+                    .candidates(p)
+                    .iter()
+                    .find(|&&b| boxes[b as usize].contains(p))
+                {
+                    *slot = *b;
                 }
             }
         }
-        // Members per box, in input order.
-        let mut start = vec![0u32; boxes.len() + 1];
-        for &b in &box_of {
-            if b != NO_BOX {
-                start[b as usize + 1] += 1;
-            }
-        }
-        for k in 1..start.len() {
-            start[k] += start[k - 1];
-        }
-        let mut cursor = start.clone();
-        let mut items = vec![0u32; start[boxes.len()] as usize];
-        for (i, &b) in box_of.iter().enumerate() {
-            if b != NO_BOX {
-                let slot = &mut cursor[b as usize];
-                items[*slot as usize] = i as u32;
-                *slot += 1;
-            }
-        }
+        let members = box_of
+            .iter()
+            .enumerate()
+            .filter(|&(_, &b)| b != NO_BOX)
+            .map(|(i, &b)| (b as usize, i as u32));
+        let (start, items) = compressed_rows(boxes.len(), members);
         InBox {
             box_of,
             start,
@@ -163,6 +76,116 @@ impl InBox {
     pub fn total(&self) -> usize {
         self.items.len()
     }
+}
+
+/// A uniform 2-D grid over the boxes' footprints (at most 256 x 256 cells, none smaller than
+/// 0.5 m) listing, per cell, the boxes whose footprint bounds touch it, in box order.
+struct BoxGrid {
+    lo: [f32; 2],
+    hi: [f32; 2],
+    inv: f32,
+    gx: usize,
+    gy: usize,
+    start: Vec<u32>,
+    list: Vec<u32>,
+}
+
+impl BoxGrid {
+    /// The grid over `boxes`; `None` when no box has finite bounds.
+    fn new(boxes: &[Box3]) -> Option<BoxGrid> {
+        let fp: Vec<Option<[f32; 4]>> = boxes.iter().map(footprint).collect();
+        let mut lo = [f32::INFINITY; 2];
+        let mut hi = [f32::NEG_INFINITY; 2];
+        for r in fp.iter().flatten() {
+            lo = [lo[0].min(r[0]), lo[1].min(r[1])];
+            hi = [hi[0].max(r[2]), hi[1].max(r[3])];
+        }
+        if !(lo[0] <= hi[0] && lo[1] <= hi[1]) {
+            return None;
+        }
+        let cell = ((hi[0] - lo[0]).max(hi[1] - lo[1]) / 256.0).max(0.5);
+        let inv = 1.0 / cell;
+        let gx = (((hi[0] - lo[0]) * inv) as usize + 1).min(257);
+        let gy = (((hi[1] - lo[1]) * inv) as usize + 1).min(257);
+        let mut grid = BoxGrid {
+            lo,
+            hi,
+            inv,
+            gx,
+            gy,
+            start: Vec::new(),
+            list: Vec::new(),
+        };
+        let ranges: Vec<Option<[usize; 4]>> = fp
+            .iter()
+            .map(|r| r.map(|r| [grid.cx(r[0]), grid.cy(r[1]), grid.cx(r[2]), grid.cy(r[3])]))
+            .collect();
+        let cells = ranges.iter().enumerate().flat_map(|(b, g)| {
+            g.iter().flat_map(move |g| {
+                (g[0]..=g[2])
+                    .flat_map(move |cx| (g[1]..=g[3]).map(move |cy| (cx * gy + cy, b as u32)))
+            })
+        });
+        (grid.start, grid.list) = compressed_rows(gx * gy, cells);
+        Some(grid)
+    }
+
+    fn cx(&self, x: f32) -> usize {
+        (((x - self.lo[0]) * self.inv).max(0.0) as usize).min(self.gx - 1)
+    }
+
+    fn cy(&self, y: f32) -> usize {
+        (((y - self.lo[1]) * self.inv).max(0.0) as usize).min(self.gy - 1)
+    }
+
+    /// The boxes whose footprint bounds touch the cell of `p`, in box order (none outside the grid).
+    fn candidates(&self, p: [f32; 3]) -> &[u32] {
+        let (lo, hi) = (self.lo, self.hi);
+        if !(p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1]) {
+            return &[];
+        }
+        let c = self.cx(p[0]) * self.gy + self.cy(p[1]);
+        &self.list[self.start[c] as usize..self.start[c + 1] as usize]
+    }
+}
+
+/// The bounds `[x0, y0, x1, y1]` of a box's footprint (axis-aligned around the rotated rectangle,
+/// a hair larger so rounding never drops a point that [`Box3::contains`] accepts); `None` for a
+/// box with a non-finite size or position.
+fn footprint(b: &Box3) -> Option<[f32; 4]> {
+    let (s, c) = b.yaw.sin_cos();
+    let hx = 0.5 * (b.size[0] * c.abs() + b.size[1] * s.abs()) * 1.0001 + 1e-4;
+    let hy = 0.5 * (b.size[0] * s.abs() + b.size[1] * c.abs()) * 1.0001 + 1e-4;
+    let r = [
+        b.center[0] - hx,
+        b.center[1] - hy,
+        b.center[0] + hx,
+        b.center[1] + hy,
+    ];
+    (r.iter().all(|v| v.is_finite()) && b.size[2].is_finite() && b.center[2].is_finite())
+        .then_some(r)
+}
+
+/// Groups `(group, value)` pairs into compressed rows over `groups` groups: group g's values are
+/// `list[start[g]..start[g + 1]]`, in the order given.
+fn compressed_rows(
+    groups: usize,
+    pairs: impl Iterator<Item = (usize, u32)> + Clone,
+) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; groups + 1];
+    for (g, _) in pairs.clone() {
+        start[g + 1] += 1;
+    }
+    for k in 1..start.len() {
+        start[k] += start[k - 1];
+    }
+    let mut cursor = start.clone();
+    let mut list = vec![0u32; start[groups] as usize];
+    for (g, v) in pairs {
+        list[cursor[g] as usize] = v;
+        cursor[g] += 1;
+    }
+    (start, list)
 }
 
 /// Fills `plan` with every point in input order: points with `moved[i]` set at their new position,

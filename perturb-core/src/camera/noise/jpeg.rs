@@ -6,6 +6,7 @@ use crate::camera::ops::{
 };
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
+use rayon::prelude::*;
 
 /// C-A4 jpeg_compression: JPEG quality, severities 1..5 (PerturbationDrive `jpeg_filter`, which
 /// round-trips through OpenCV's libjpeg).
@@ -448,39 +449,41 @@ wide_fn! {
     }
 }
 
-impl CameraPerturbation for JpegCompression {
-    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
-        use rayon::prelude::*;
+impl JpegCompression {
+    /// A mono8 frame: the luma plane only.
+    fn apply_mono(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>) {
         let (w, h) = (input.width as usize, input.height as usize);
-        let f = input.format;
-        if f.is_mono() {
-            let mut y = Plane::overwritten(w, h);
-            let pw = y.w;
-            y.data
-                .par_chunks_mut(pw)
-                .take(h)
-                .enumerate()
-                .for_each(|(r, row)| {
-                    for (d, s) in row.iter_mut().zip(input.row(r)) {
-                        *d = *s as f32;
-                    }
-                });
-            y.pad(w, h);
-            self.roundtrip_plane(&mut y, &self.luma_q);
-            par_rows(input, output, |r, _, dst| {
-                for (x, d) in dst.iter_mut().enumerate() {
-                    *d = byte(y.data[r * pw + x] + 0.5);
+        let mut y = Plane::overwritten(w, h);
+        let pw = y.w;
+        y.data
+            .par_chunks_mut(pw)
+            .take(h)
+            .enumerate()
+            .for_each(|(r, row)| {
+                for (d, s) in row.iter_mut().zip(input.row(r)) {
+                    *d = *s as f32;
                 }
             });
-            y.recycle();
-            return;
-        }
+        y.pad(w, h);
+        self.roundtrip_plane(&mut y, &self.luma_q);
+        par_rows(input, output, |r, _, dst| {
+            for (x, d) in dst.iter_mut().enumerate() {
+                *d = byte(y.data[r * pw + x] + 0.5);
+            }
+        });
+        y.recycle();
+    }
+
+    /// The colour frame as JPEG's planes, padded to whole blocks: full-resolution Y, and Cb and
+    /// Cr averaged over 2 x 2 pixels (4:2:0). One pair of image rows per chroma row.
+    fn to_planes(input: &ImageView<'_>) -> [Plane; 3] {
+        let (w, h) = (input.width as usize, input.height as usize);
+        let f = input.format;
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
         let mut yp = Plane::overwritten(w, h);
         let mut cb = Plane::new(cw, ch);
         let mut cr = Plane::new(cw, ch);
         let (ypw, cpw) = (yp.w, cb.w);
-        // Colour conversion and 2x2 chroma averaging, one pair of image rows per chroma row.
         yp.data
             .par_chunks_mut(2 * ypw)
             .zip(cb.data.par_chunks_mut(cpw).zip(cr.data.par_chunks_mut(cpw)))
@@ -510,14 +513,22 @@ impl CameraPerturbation for JpegCompression {
         yp.pad(w, h);
         cb.pad(cw, ch);
         cr.pad(cw, ch);
-        self.roundtrip_plane(&mut yp, &self.luma_q);
-        self.roundtrip_plane(&mut cb, &self.chroma_q);
-        self.roundtrip_plane(&mut cr, &self.chroma_q);
-        // Fancy upsampling: each output sample weighs its nearest chroma sample 3/4 and the next one
-        // 1/4 in each direction (9/16, 3/16, 3/16, 1/16): vertical weights first, then
-        // horizontal, then the colour conversion on contiguous rows (vectorisable); the bytes are
-        // interleaved last.
+        [yp, cb, cr]
+    }
 
+    /// The decoded planes back to the frame's pixels with libjpeg's fancy upsampling: each output
+    /// sample weighs its nearest chroma sample 3/4 and the next one 1/4 in each direction (9/16,
+    /// 3/16, 3/16, 1/16): vertical weights first, then horizontal, then the colour conversion on
+    /// contiguous rows (vectorisable); the bytes are interleaved last.
+    fn from_planes(
+        input: &ImageView<'_>,
+        [yp, cb, cr]: &[Plane; 3],
+        output: &mut ImageViewMut<'_>,
+    ) {
+        let (w, h) = (input.width as usize, input.height as usize);
+        let f = input.format;
+        let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+        let (ypw, cpw) = (yp.w, cb.w);
         let vertical = |p: &Plane, cy: usize, ny: usize, t: &mut [f32]| {
             weigh_rows(&p.data[cy * cpw..][..cw], &p.data[ny * cpw..][..cw], t);
         };
@@ -535,9 +546,9 @@ impl CameraPerturbation for JpegCompression {
                         (cy + 1).min(ch - 1)
                     };
                     let (u, v) = uv.split_at_mut(w);
-                    vertical(&cb, cy, ny, t);
+                    vertical(cb, cy, ny, t);
                     upsample_row(t, u);
-                    vertical(&cr, cy, ny, t);
+                    vertical(cr, cy, ny, t);
                     upsample_row(t, v);
                     let yrow = &yp.data[r * ypw..][..w];
                     let (p0, rest) = planes.split_at_mut(w);
@@ -547,7 +558,22 @@ impl CameraPerturbation for JpegCompression {
                     copy_alpha(f, input.row(r), dst);
                 },
             );
-        for p in [yp, cb, cr] {
+    }
+}
+
+impl CameraPerturbation for JpegCompression {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
+        if input.format.is_mono() {
+            self.apply_mono(input, output);
+            return;
+        }
+        let mut planes = Self::to_planes(input);
+        let [yp, cb, cr] = &mut planes;
+        self.roundtrip_plane(yp, &self.luma_q);
+        self.roundtrip_plane(cb, &self.chroma_q);
+        self.roundtrip_plane(cr, &self.chroma_q);
+        Self::from_planes(input, &planes, output);
+        for p in planes {
             p.recycle();
         }
     }

@@ -55,12 +55,10 @@ fn bolt(rng: &mut Rng, a: (f32, f32), b: (f32, f32), amp: f32, levels: u32) -> V
     pts
 }
 
-impl CameraPerturbation for Lightning {
-    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        let (w, h) = (input.width as f32, input.height as f32);
-        let k = size_scale(input.width, input.height).max(0.05);
-        let strike = seq / STRIKE_FRAMES;
-        let age = seq % STRIKE_FRAMES;
+impl Lightning {
+    /// The bolt of strike `strike` on a `w` x `h` frame: the main path from the top edge, then
+    /// three branches leaving it.
+    fn paths(&self, strike: u64, w: f32, h: f32) -> Vec<Vec<(f32, f32)>> {
         let mut rng = Rng::for_frame(self.seed, strike, 0xC9);
         let x0 = (0.15 + rng.f32() * 0.7) * w;
         let end = (
@@ -77,6 +75,87 @@ impl CameraPerturbation for Lightning {
             );
             paths.push(bolt(&mut rng, from, to, 0.06 * h, 5));
         }
+        paths
+    }
+}
+
+/// The stamp drawn along a bolt's paths: per row offset, the (dx, coverage, is-core) of the pixels
+/// it covers by more than 1%: full inside the core radius, a Gaussian glow around it.
+fn glow_stamp(core: f32, glow: f32) -> Vec<StampRow> {
+    let rr = glow.ceil() as i64;
+    (-rr..=rr)
+        .map(|dy| {
+            let row = (-rr..=rr)
+                .filter_map(|dx| {
+                    let d = ((dx * dx + dy * dy) as f32).sqrt();
+                    let (cov, is_core) = if d <= core {
+                        (1.0, true)
+                    } else {
+                        let g = (-(d - core).powi(2) / (2.0 * (glow / 2.5).powi(2))).exp() * 0.12;
+                        (g, false)
+                    };
+                    (cov > 0.01).then_some((dx, cov, is_core))
+                })
+                .collect();
+            (dy, row)
+        })
+        .collect()
+}
+
+/// Stamps `stamp` along `path` every `0.7 core` pixels with opacity `a` times the stamp's
+/// coverage times the path's `strength`: a white-violet core, a bluer glow.
+fn draw_path(
+    output: &mut ImageViewMut<'_>,
+    path: &[(f32, f32)],
+    stamp: &[StampRow],
+    core: f32,
+    (a, strength): (f32, f32),
+) {
+    let (iw, ih) = (output.width as i64, output.height as i64);
+    let f = output.format;
+    let c = f.channels();
+    let rgb = f.rgb_offsets();
+    for seg in path.windows(2) {
+        let (p, q) = (seg[0], seg[1]);
+        let len = ((q.0 - p.0).powi(2) + (q.1 - p.1).powi(2)).sqrt();
+        let steps = (len / (core * 0.7)).ceil().max(1.0) as usize;
+        for sidx in 0..=steps {
+            let t = sidx as f32 / steps as f32;
+            let (cx, cy) = (
+                (p.0 + (q.0 - p.0) * t) as i64,
+                (p.1 + (q.1 - p.1) * t) as i64,
+            );
+            for (dy, pixels) in stamp {
+                let y = cy + dy;
+                if y < 0 || y >= ih {
+                    continue;
+                }
+                let row = output.row_mut(y as usize);
+                for &(dx, cov, is_core) in pixels {
+                    let x = cx + dx;
+                    let alpha = (a * cov * strength).min(1.0);
+                    if x < 0 || x >= iw || alpha <= 0.0 {
+                        continue;
+                    }
+                    let colour = if is_core {
+                        [245.0, 240.0, 255.0]
+                    } else {
+                        [180.0, 170.0, 255.0]
+                    };
+                    let px = &mut row[x as usize * c..x as usize * c + c];
+                    blend_into(f, rgb, px, colour, alpha);
+                }
+            }
+        }
+    }
+}
+
+impl CameraPerturbation for Lightning {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
+        let (w, h) = (input.width as f32, input.height as f32);
+        let k = size_scale(input.width, input.height).max(0.05);
+        let age = seq % STRIKE_FRAMES;
+        let paths = self.paths(seq / STRIKE_FRAMES, w, h);
         // Flicker: strong at the start of the strike, a re-strike, then fading.
         let flicker = [
             1.0, 0.55, 0.9, 0.7, 0.45, 0.35, 0.3, 0.25, 0.2, 0.2, 0.15, 0.15,
@@ -96,66 +175,10 @@ impl CameraPerturbation for Lightning {
             copy_frame(input, output);
         }
         let (core, glow) = ((1.5 * k).max(1.0), 10.0 * k);
-        // The stamp drawn along the paths: per row offset, the (dx, coverage, is-core) of the
-        // pixels it covers by more than 1%.
-        let rr = glow.ceil() as i64;
-        let stamp: Vec<StampRow> = (-rr..=rr)
-            .map(|dy| {
-                let row = (-rr..=rr)
-                    .filter_map(|dx| {
-                        let d = ((dx * dx + dy * dy) as f32).sqrt();
-                        let (cov, is_core) = if d <= core {
-                            (1.0, true)
-                        } else {
-                            let g =
-                                (-(d - core).powi(2) / (2.0 * (glow / 2.5).powi(2))).exp() * 0.12;
-                            (g, false)
-                        };
-                        (cov > 0.01).then_some((dx, cov, is_core))
-                    })
-                    .collect();
-                (dy, row)
-            })
-            .collect();
-        let (iw, ih) = (input.width as i64, input.height as i64);
-        let f = output.format;
-        let c = f.channels();
-        let [ri, gi, bi] = f.rgb_offsets();
+        let stamp = glow_stamp(core, glow);
         for (pi, path) in paths.iter().enumerate() {
             let strength = if pi == 0 { 1.0 } else { 0.7 };
-            for seg in path.windows(2) {
-                let (p, q) = (seg[0], seg[1]);
-                let len = ((q.0 - p.0).powi(2) + (q.1 - p.1).powi(2)).sqrt();
-                let steps = (len / (core * 0.7)).ceil().max(1.0) as usize;
-                for sidx in 0..=steps {
-                    let t = sidx as f32 / steps as f32;
-                    let (cx, cy) = (
-                        (p.0 + (q.0 - p.0) * t) as i64,
-                        (p.1 + (q.1 - p.1) * t) as i64,
-                    );
-                    for (dy, pixels) in &stamp {
-                        let y = cy + dy;
-                        if y < 0 || y >= ih {
-                            continue;
-                        }
-                        let row = output.row_mut(y as usize);
-                        for &(dx, cov, is_core) in pixels {
-                            let x = cx + dx;
-                            let alpha = (a * cov * strength).min(1.0);
-                            if x < 0 || x >= iw || alpha <= 0.0 {
-                                continue;
-                            }
-                            let colour = if is_core {
-                                [245.0, 240.0, 255.0]
-                            } else {
-                                [180.0, 170.0, 255.0]
-                            };
-                            let px = &mut row[x as usize * c..x as usize * c + c];
-                            blend_into(f, [ri, gi, bi], px, colour, alpha);
-                        }
-                    }
-                }
-            }
+            draw_path(output, path, &stamp, core, (a, strength));
         }
     }
 }

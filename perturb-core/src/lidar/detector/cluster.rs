@@ -156,15 +156,42 @@ impl Clusterer {
 
     /// Step 2: DBSCAN over the centroids with a column grid of cell >= eps.
     fn dbscan(&mut self, c: &DetectorConfig, eps: f32) {
+        let (cols, rows) = self.sort_into_columns(c, eps);
+        let zw = if c.cluster_2d { 0.0 } else { 1.0 };
+        self.order_by_height(cols * rows, zw);
+        let search = Neighbours {
+            sorted: &self.sorted,
+            col_start: &self.col_start,
+            zorder: &self.zorder,
+            zval: &self.zval,
+            cols,
+            rows,
+            eps2: eps * eps,
+            zwin: eps * 1.001 + 1e-4,
+        };
+        let min_samples = c.min_samples.max(1) as u32;
+        search.find_cores(min_samples, &mut self.core);
+        let column = |s: usize| self.col_of[self.col_items[s] as usize] as usize;
+        search.grow_clusters(&self.core, column, &mut self.label, &mut self.queue);
+        // Back to voxel order.
+        self.voxel_label.clear();
+        self.voxel_label.resize(self.centroids.len(), -1);
+        for (s, &v) in self.col_items.iter().enumerate() {
+            self.voxel_label[v as usize] = self.label[s];
+        }
+    }
+
+    /// Sorts the centroids into the columns of the region's grid (cell >= eps), restricted to the
+    /// sub-grid of the cells they occupy (same cells, same column order): a split of one cluster
+    /// costs in proportion to that cluster, not to the whole region of interest. Fills `col_of`,
+    /// `col_start` and `col_items` (a counting sort); returns the sub-grid's (columns, rows).
+    fn sort_into_columns(&mut self, c: &DetectorConfig, eps: f32) -> (usize, usize) {
         if self.dcell < eps || self.dcell > 2.0 * eps {
             self.size_grid([c.min_x, c.min_y], [c.max_x, c.max_y], eps);
         }
         let m = self.centroids.len();
         let (gcols, grows, inv) = (self.dcols, self.drows, 1.0 / self.dcell);
         let o = self.dorigin;
-        // Cells of the region's grid, then the sub-grid of the cells the centroids occupy (same
-        // cells, same column order): a split of one cluster costs in proportion to that cluster,
-        // not to the whole region of interest.
         let cell = |p: &[f32; 3]| {
             (
                 (((p[0] - o[0]) * inv).max(0.0) as usize).min(gcols - 1),
@@ -180,7 +207,6 @@ impl Clusterer {
             (x0, x1, y0, y1) = (0, 0, 0, 0);
         }
         let (cols, rows) = (x1 - x0 + 1, y1 - y0 + 1);
-        // Counting sort of the centroids into grid columns.
         self.col_of.clear();
         self.col_of.extend(self.centroids.iter().map(|p| {
             let (cx, cy) = cell(p);
@@ -206,22 +232,24 @@ impl Clusterer {
             self.col_start[k] = self.col_start[k - 1];
         }
         self.col_start[0] = 0;
-        let eps2 = eps * eps;
-        let zw = if c.cluster_2d { 0.0 } else { 1.0 };
-        let min_samples = c.min_samples.max(1) as u32;
-        // The centroids in column order, so that every neighbour scan reads contiguous memory.
+        (cols, rows)
+    }
+
+    /// The centroids in column order (`sorted`, z scaled by `zw`), so that every neighbour scan
+    /// reads contiguous memory; and per column, the positions of its centroids ordered by height
+    /// (`zorder`, `zval`), so that a neighbour query reads only the slice of each column within
+    /// eps in z (the columns span the whole height of the scene). Only the search uses the height
+    /// order: the seeds are visited in column order, so the clusters and their labels do not
+    /// depend on it.
+    fn order_by_height(&mut self, columns: usize, zw: f32) {
         self.sorted.clear();
         self.sorted.extend(self.col_items.iter().map(|&v| {
             let p = self.centroids[v as usize];
             [p[0], p[1], p[2] * zw]
         }));
-        // Per column, the positions of its centroids ordered by height, so that a neighbour
-        // query reads only the slice of each column within eps in z (the columns span the whole
-        // height of the scene). Only the search uses this order: the seeds are visited in column
-        // order, so the clusters and their labels do not depend on it.
         self.zorder.clear();
-        self.zorder.extend(0..m as u32);
-        for col in 0..cols * rows {
+        self.zorder.extend(0..self.sorted.len() as u32);
+        for col in 0..columns {
             let (a, b) = (
                 self.col_start[col] as usize,
                 self.col_start[col + 1] as usize,
@@ -238,87 +266,6 @@ impl Clusterer {
         self.zval.clear();
         self.zval
             .extend(self.zorder.iter().map(|&i| self.sorted[i as usize][2]));
-        let sorted = &self.sorted;
-        let col_start = &self.col_start;
-        let (zorder, zval) = (&self.zorder, &self.zval);
-        let zwin = eps * 1.001 + 1e-4;
-        // Calls `f(t)` for every centroid position `t` within eps of the centroid at position
-        // `s` (itself included), column by column of the 3 x 3 around its column `col`; stops
-        // early when `f` returns false.
-        let neighbours = |s: usize, col: usize, f: &mut dyn FnMut(usize) -> bool| {
-            let p = &sorted[s];
-            let (cx, cy) = (col / rows, col % rows);
-            for nx in cx.saturating_sub(1)..=(cx + 1).min(cols - 1) {
-                for ny in cy.saturating_sub(1)..=(cy + 1).min(rows - 1) {
-                    let c = nx * rows + ny;
-                    let (a, b) = (col_start[c] as usize, col_start[c + 1] as usize);
-                    if a == b {
-                        continue;
-                    }
-                    // A window a little wider than eps: the distance test below decides, with
-                    // the same rounding as a scan of the whole column.
-                    let lo = a + zval[a..b].partition_point(|&z| z < p[2] - zwin);
-                    for k in lo..b {
-                        if zval[k] > p[2] + zwin {
-                            break;
-                        }
-                        let t = zorder[k] as usize;
-                        let q = &sorted[t];
-                        let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
-                        if dx * dx + dy * dy + dz * dz <= eps2 && !f(t) {
-                            return;
-                        }
-                    }
-                }
-            }
-        };
-        // Core points: at least min_samples neighbours within eps, the point itself included.
-        self.core.clear();
-        self.core.resize(m, false);
-        for col in 0..cols * rows {
-            let (a, b) = (col_start[col] as usize, col_start[col + 1] as usize);
-            for s in a..b {
-                let mut count = 0u32;
-                neighbours(s, col, &mut |_| {
-                    count += 1;
-                    count < min_samples
-                });
-                self.core[s] = count >= min_samples;
-            }
-        }
-        // Clusters: connected core points plus the border points they reach (the first one).
-        self.label.clear();
-        self.label.resize(m, -1);
-        let mut next = 0i32;
-        for seed in 0..m {
-            if !self.core[seed] || self.label[seed] >= 0 {
-                continue;
-            }
-            self.label[seed] = next;
-            self.queue.clear();
-            self.queue.push(seed as u32);
-            while let Some(s) = self.queue.pop() {
-                let s = s as usize;
-                let col = self.col_of[self.col_items[s] as usize] as usize;
-                let (label, core, queue) = (&mut self.label, &self.core, &mut self.queue);
-                neighbours(s, col, &mut |t| {
-                    if label[t] < 0 {
-                        label[t] = next;
-                        if core[t] {
-                            queue.push(t as u32);
-                        }
-                    }
-                    true
-                });
-            }
-            next += 1;
-        }
-        // Back to voxel order.
-        self.voxel_label.clear();
-        self.voxel_label.resize(m, -1);
-        for (s, &v) in self.col_items.iter().enumerate() {
-            self.voxel_label[v as usize] = self.label[s];
-        }
     }
 
     /// Voxel counts and raw point lists per cluster (counting sort).
@@ -392,6 +339,109 @@ pub(crate) fn radix_sort_high(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
         }
         std::mem::swap(keys, tmp);
         shift += 11;
+    }
+}
+
+/// The neighbour search of DBSCAN over centroids sorted into grid columns (see
+/// [`Clusterer::sort_into_columns`] and [`Clusterer::order_by_height`]).
+struct Neighbours<'a> {
+    sorted: &'a [[f32; 3]],
+    col_start: &'a [u32],
+    zorder: &'a [u32],
+    zval: &'a [f32],
+    cols: usize,
+    rows: usize,
+    eps2: f32,
+    /// Half the height window read per column: a little wider than eps, so the distance test
+    /// decides, with the same rounding as a scan of the whole column.
+    zwin: f32,
+}
+
+impl Neighbours<'_> {
+    /// Calls `f(t)` for every centroid position `t` within eps of the centroid at position `s`
+    /// (itself included), column by column of the 3 x 3 around its column `col`; stops early when
+    /// `f` returns false.
+    fn each(&self, s: usize, col: usize, f: &mut dyn FnMut(usize) -> bool) {
+        let p = &self.sorted[s];
+        let (cols, rows) = (self.cols, self.rows);
+        let (cx, cy) = (col / rows, col % rows);
+        for nx in cx.saturating_sub(1)..=(cx + 1).min(cols - 1) {
+            for ny in cy.saturating_sub(1)..=(cy + 1).min(rows - 1) {
+                let c = nx * rows + ny;
+                let (a, b) = (self.col_start[c] as usize, self.col_start[c + 1] as usize);
+                if a == b {
+                    continue;
+                }
+                let lo = a + self.zval[a..b].partition_point(|&z| z < p[2] - self.zwin);
+                for k in lo..b {
+                    if self.zval[k] > p[2] + self.zwin {
+                        break;
+                    }
+                    let t = self.zorder[k] as usize;
+                    let q = &self.sorted[t];
+                    let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
+                    if dx * dx + dy * dy + dz * dz <= self.eps2 && !f(t) {
+                        return;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Core points: at least `min_samples` neighbours within eps, the point itself included.
+    fn find_cores(&self, min_samples: u32, core: &mut Vec<bool>) {
+        core.clear();
+        core.resize(self.sorted.len(), false);
+        for col in 0..self.cols * self.rows {
+            let (a, b) = (
+                self.col_start[col] as usize,
+                self.col_start[col + 1] as usize,
+            );
+            for s in a..b {
+                let mut count = 0u32;
+                self.each(s, col, &mut |_| {
+                    count += 1;
+                    count < min_samples
+                });
+                core[s] = count >= min_samples;
+            }
+        }
+    }
+
+    /// Clusters: connected core points plus the border points they reach (the first one), labelled
+    /// 0, 1, ... in seed order; -1 is noise. `column(s)` is the column of position `s`.
+    fn grow_clusters(
+        &self,
+        core: &[bool],
+        column: impl Fn(usize) -> usize,
+        label: &mut Vec<i32>,
+        queue: &mut Vec<u32>,
+    ) {
+        let m = self.sorted.len();
+        label.clear();
+        label.resize(m, -1);
+        let mut next = 0i32;
+        for seed in 0..m {
+            if !core[seed] || label[seed] >= 0 {
+                continue;
+            }
+            label[seed] = next;
+            queue.clear();
+            queue.push(seed as u32);
+            while let Some(s) = queue.pop() {
+                let s = s as usize;
+                self.each(s, column(s), &mut |t| {
+                    if label[t] < 0 {
+                        label[t] = next;
+                        if core[t] {
+                            queue.push(t as u32);
+                        }
+                    }
+                    true
+                });
+            }
+            next += 1;
+        }
     }
 }
 
