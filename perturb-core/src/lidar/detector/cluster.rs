@@ -397,13 +397,13 @@ impl Neighbours<'_> {
                 self.col_start[col] as usize,
                 self.col_start[col + 1] as usize,
             );
-            for s in a..b {
+            for (s, is_core) in core.iter_mut().enumerate().take(b).skip(a) {
                 let mut count = 0u32;
                 self.each(s, col, &mut |_| {
                     count += 1;
                     count < min_samples
                 });
-                core[s] = count >= min_samples;
+                *is_core = count >= min_samples;
             }
         }
     }
