@@ -1,53 +1,11 @@
-//! The topic side of an ingress or egress, over either transport: ROS 2 over DDS
-//! ([`crate::dds`]) or ROS 1 over TCPROS ([`crate::ros1`]). Ingress and egress see only these
-//! two traits, so a bridge can mix them (ROS 1 sensors in, ROS 2 out, or the other way round).
+//! Opening the topic side of an ingress or egress over either transport: ROS 2 over DDS
+//! ([`crate::dds`]) or ROS 1 over TCPROS ([`crate::ros1`]), as the traits of [`crate::topic`].
 
-use crate::dds::{DdsBackend, DdsReader, DdsWriter, Received, TopicSpec};
+use crate::dds::{DdsBackend, DdsReader, DdsWriter, TopicSpec};
 use crate::frame::Payload;
+use crate::topic::{OnMessage, TopicReader, TopicWriter};
 use std::sync::Arc;
 use std::time::Duration;
-
-/// What a [`TopicReader`] calls for each message: the ROS 1 header `seq` (if any) and the
-/// message, or why it does not decode.
-pub type OnMessage<'f> = dyn FnMut(Option<u32>, Result<Received<'_>, perturb_core::Error>) + 'f;
-
-/// Reads sensor messages from one topic.
-pub trait TopicReader: Send {
-    /// Waits up to `timeout` and passes every available message to `f` with the ROS 1 header
-    /// `seq` (`None` over ROS 2, whose headers have none); a message that does not decode is
-    /// passed as an error. Returns how many were passed.
-    fn take(&mut self, timeout: Duration, f: &mut OnMessage<'_>) -> anyhow::Result<usize>;
-
-    /// Messages known to be lost before they reached the reader (gaps in a ROS 1 publisher's
-    /// header `seq`, which include messages dropped from a full queue).
-    fn lost(&self) -> u64 {
-        0
-    }
-
-    /// Messages the reader received and dropped itself because its queue was full.
-    fn dropped(&self) -> u64 {
-        0
-    }
-}
-
-/// Writes sensor messages on one topic.
-pub trait TopicWriter: Send {
-    /// Publishes one message; `seq` is the frame's sequence number, written into the header
-    /// where the message format has one (ROS 1).
-    fn write(&mut self, seq: u64, msg: &Payload<'_>) -> anyhow::Result<()>;
-
-    /// Messages written but dropped before they reached a subscriber (a ROS 1 subscriber slower
-    /// than the stream); summed over subscribers, including those that left.
-    fn dropped(&self) -> u64 {
-        0
-    }
-
-    /// Readers that asked for a QoS this writer does not offer and therefore receive nothing
-    /// (DDS; ROS 1 has no QoS), with what to change.
-    fn incompatible_readers(&mut self) -> Option<String> {
-        None
-    }
-}
 
 /// Where an ingress or egress opens its topic.
 #[derive(Clone)]

@@ -24,3 +24,4 @@ pub mod ros1;
 pub mod run;
 pub mod stats;
 pub mod synthetic;
+pub mod topic;

@@ -18,6 +18,7 @@ pub mod daemon;
 pub mod perturbation;
 pub mod state;
 pub mod stats;
+pub mod stream;
 pub mod worker;
 
 pub use config::{Config, StreamConfig};

@@ -2,7 +2,7 @@
 //! gets a clear error from: unknown ID, wrong modality, severity out of range, not implemented in
 //! this build, needs object boxes the daemon does not have.
 
-use crate::config::StreamConfig;
+use crate::stream::StreamConfig;
 use perturb_core::cloud::{CloudView, PointLayout};
 use perturb_core::image::ImageGeometry;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber, Spec};

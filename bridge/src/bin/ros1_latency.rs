@@ -15,10 +15,10 @@
 //! frame that left the daemon.
 
 use perturb_bridge::dds::{Qos, Received, RosType, TopicSpec};
-use perturb_bridge::endpoint::TopicReader;
 use perturb_bridge::frame::{OwnedPayload, Payload, monotonic_ns};
 use perturb_bridge::ros1::{Node, Ros1Settings, TopicReader1};
 use perturb_bridge::stats::summarize;
+use perturb_bridge::topic::TopicReader;
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};

@@ -30,8 +30,8 @@ pub use publisher::Publisher;
 pub use subscriber::Subscriber;
 
 use crate::dds::{Received, RosType, TopicSpec};
-use crate::endpoint::{OnMessage, TopicReader, TopicWriter};
 use crate::frame::Payload;
+use crate::topic::{OnMessage, TopicReader, TopicWriter};
 use perturb_core::formats::ros::{CompressedImageMsg, ImageMsg, PointCloud2Msg};
 use perturb_core::formats::ros1::{self, MsgType};
 use std::collections::HashMap;

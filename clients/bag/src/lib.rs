@@ -27,15 +27,17 @@
 pub mod dynamic;
 pub mod events;
 pub mod guard;
+mod message;
 mod read;
 pub mod ros1;
 pub mod schema;
 mod write;
 mod writer;
 
-pub use read::{
-    Bag, BagMessage, Filter, ReadOrder, ReadReport, SensorMessage, SensorType, TopicInfo,
+pub use message::{
+    BagMessage, Filter, ReadOrder, ReadReport, SensorMessage, SensorType, TopicInfo,
 };
+pub use read::Bag;
 pub use write::{BagWriter, Compression, WriterOptions};
 pub use writer::{AnyWriter, BagFormat};
 

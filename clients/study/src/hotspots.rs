@@ -5,54 +5,9 @@
 //! A failure in no cluster is noise (drawn faintly on the map).
 
 use crate::analyze::{Failure, RunResult};
+use crate::stats::dbscan;
 use serde::Serialize;
 use std::collections::BTreeMap;
-
-/// DBSCAN over 2-D points: `eps` neighbourhood radius, `min_points` neighbours (the point
-/// itself included) that make a core point. Returns each point's cluster (0, 1, ... in order of
-/// discovery) or None for noise.
-pub fn dbscan(points: &[[f64; 2]], eps: f64, min_points: usize) -> Vec<Option<usize>> {
-    let n = points.len();
-    let near = |i: usize| -> Vec<usize> {
-        (0..n)
-            .filter(|&j| (points[i][0] - points[j][0]).hypot(points[i][1] - points[j][1]) <= eps)
-            .collect()
-    };
-    let mut label: Vec<Option<usize>> = vec![None; n];
-    let mut visited = vec![false; n];
-    let mut next = 0;
-    for i in 0..n {
-        if visited[i] {
-            continue;
-        }
-        visited[i] = true;
-        let nb = near(i);
-        if nb.len() < min_points {
-            continue;
-        }
-        let c = next;
-        next += 1;
-        label[i] = Some(c);
-        let mut queue = nb;
-        let mut k = 0;
-        while k < queue.len() {
-            let j = queue[k];
-            k += 1;
-            if label[j].is_none() {
-                label[j] = Some(c);
-            }
-            if visited[j] {
-                continue;
-            }
-            visited[j] = true;
-            let nb = near(j);
-            if nb.len() >= min_points {
-                queue.extend(nb.into_iter().filter(|q| label[*q].is_none()));
-            }
-        }
-    }
-    label
-}
 
 /// One failure of one run.
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -1,6 +1,7 @@
 //! The statistics of the transfer analysis: Spearman's rank correlation with its two-sided
 //! p-value (Student's t with n - 2 degrees of freedom, as scipy's `spearmanr`), percentile
-//! bootstrap confidence intervals, Benjamini-Hochberg q-values and top-k overlap.
+//! bootstrap confidence intervals, Benjamini-Hochberg q-values and top-k overlap; DBSCAN over
+//! 2-D points for the failure hotspots.
 
 /// Ranks 1..n, ties sharing their average rank.
 pub fn ranks(v: &[f64]) -> Vec<f64> {
@@ -245,6 +246,52 @@ pub fn top_k_overlap(a: &[f64], b: &[f64], k: usize) -> Option<f64> {
     };
     let (ta, tb) = (top(a), top(b));
     Some(ta.iter().filter(|i| tb.contains(i)).count() as f64 / k as f64)
+}
+
+/// DBSCAN over 2-D points: `eps` neighbourhood radius, `min_points` neighbours (the point
+/// itself included) that make a core point. Returns each point's cluster (0, 1, ... in order of
+/// discovery) or None for noise.
+pub fn dbscan(points: &[[f64; 2]], eps: f64, min_points: usize) -> Vec<Option<usize>> {
+    let n = points.len();
+    let near = |i: usize| -> Vec<usize> {
+        (0..n)
+            .filter(|&j| (points[i][0] - points[j][0]).hypot(points[i][1] - points[j][1]) <= eps)
+            .collect()
+    };
+    let mut label: Vec<Option<usize>> = vec![None; n];
+    let mut visited = vec![false; n];
+    let mut next = 0;
+    for i in 0..n {
+        if visited[i] {
+            continue;
+        }
+        visited[i] = true;
+        let nb = near(i);
+        if nb.len() < min_points {
+            continue;
+        }
+        let c = next;
+        next += 1;
+        label[i] = Some(c);
+        let mut queue = nb;
+        let mut k = 0;
+        while k < queue.len() {
+            let j = queue[k];
+            k += 1;
+            if label[j].is_none() {
+                label[j] = Some(c);
+            }
+            if visited[j] {
+                continue;
+            }
+            visited[j] = true;
+            let nb = near(j);
+            if nb.len() >= min_points {
+                queue.extend(nb.into_iter().filter(|q| label[*q].is_none()));
+            }
+        }
+    }
+    label
 }
 
 #[cfg(test)]

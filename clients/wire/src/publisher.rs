@@ -3,7 +3,7 @@
 
 use crate::error::{WireError, WireResult};
 use crate::header::{FrameHeader, image_bytes};
-use crate::transport::{Ipc, StreamQos, monotonic_ns, open_error, service_name};
+use crate::transport::{Ipc, StreamQos, Transport, monotonic_ns, open_error, service_name};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
@@ -150,6 +150,21 @@ impl FrameLoan {
     pub fn image_mut(&mut self) -> WireResult<ImageViewMut<'_>> {
         let h = *self.header();
         h.image_view_mut(self.payload_mut())
+    }
+}
+
+impl Transport {
+    /// Opens (or creates) `service` and a publisher on it that stamps `hop` when sending.
+    /// `initial_len` sizes the first shared-memory segment (the expected frame size); larger
+    /// frames make iceoryx2 grow the segment (power-of-two strategy).
+    pub fn publisher(
+        &self,
+        service: &str,
+        qos: &StreamQos,
+        hop: Hop,
+        initial_len: usize,
+    ) -> WireResult<FramePublisher> {
+        FramePublisher::open(self.node(), service, qos, hop, initial_len)
     }
 }
 

@@ -4,7 +4,7 @@
 use crate::error::{WireError, WireResult};
 use crate::header::{FrameHeader, WireModality};
 use crate::publisher::open_pubsub;
-use crate::transport::{Ipc, StreamQos};
+use crate::transport::{Ipc, StreamQos, Transport};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -145,6 +145,19 @@ impl std::fmt::Debug for FrameSubscriber {
             .field("service", &self.service)
             .field("buffer", &self.buffer)
             .finish()
+    }
+}
+
+impl Transport {
+    /// Opens (or creates) `service` and a subscriber on it with a queue of `buffer` samples
+    /// (at most `qos.subscriber_buffer`; `None` for that maximum).
+    pub fn subscriber(
+        &self,
+        service: &str,
+        qos: &StreamQos,
+        buffer: Option<usize>,
+    ) -> WireResult<FrameSubscriber> {
+        FrameSubscriber::open(self.node(), service, qos, buffer)
     }
 }
 

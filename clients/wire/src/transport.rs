@@ -2,8 +2,6 @@
 //! sweep, the per-stream QoS, service naming and the shared clock.
 
 use crate::error::{WireError, WireResult};
-use crate::publisher::{FramePublisher, Hop};
-use crate::subscriber::FrameSubscriber;
 use iceoryx2::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -348,30 +346,6 @@ impl Transport {
     /// that ended without cleaning up, e.g. after `kill -9`).
     pub fn sweep_dead_nodes(&self) -> WireResult<SweepReport> {
         sweep_dead_nodes(&self.config)
-    }
-
-    /// Opens (or creates) `service` and a publisher on it that stamps `hop` when sending.
-    /// `initial_len` sizes the first shared-memory segment (the expected frame size); larger
-    /// frames make iceoryx2 grow the segment (power-of-two strategy).
-    pub fn publisher(
-        &self,
-        service: &str,
-        qos: &StreamQos,
-        hop: Hop,
-        initial_len: usize,
-    ) -> WireResult<FramePublisher> {
-        FramePublisher::open(&self.node, service, qos, hop, initial_len)
-    }
-
-    /// Opens (or creates) `service` and a subscriber on it with a queue of `buffer` samples
-    /// (at most `qos.subscriber_buffer`; `None` for that maximum).
-    pub fn subscriber(
-        &self,
-        service: &str,
-        qos: &StreamQos,
-        buffer: Option<usize>,
-    ) -> WireResult<FrameSubscriber> {
-        FrameSubscriber::open(&self.node, service, qos, buffer)
     }
 }
 

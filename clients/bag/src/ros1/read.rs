@@ -10,7 +10,7 @@ use super::{
 };
 use crate::BagError;
 use crate::guard;
-use crate::read::{BagMessage, Bytes, Filter, ReadReport, TopicInfo};
+use crate::message::{BagMessage, Bytes, Filter, ReadReport, TopicInfo};
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::io::Read;

@@ -440,7 +440,7 @@ pub fn vehicles_from_nominal(runs: &[RunData], cfg: &AnalyzeConfig) -> Option<Ve
     if pts.is_empty() {
         return None;
     }
-    let labels = crate::hotspots::dbscan(&pts, cfg.match_distance_m, 3);
+    let labels = crate::stats::dbscan(&pts, cfg.match_distance_m, 3);
     let n = labels.iter().flatten().max().map_or(0, |m| m + 1);
     let centres: Vec<[f64; 2]> = (0..n)
         .map(|k| {
