@@ -14,8 +14,8 @@
 //! `PERTURB_REQUIRE_ORACLES=1` (CI).
 
 use perturb_bridge::dds::{Qos, RosType, TopicSpec};
-use perturb_bridge::topic::TopicReader;
 use perturb_bridge::ros1::{Node, Ros1Settings, TopicReader1};
+use perturb_bridge::topic::TopicReader;
 use perturb_core::formats::ros::{Header, ImageMsg};
 use perturb_core::formats::ros1;
 use perturb_tests::{
