@@ -7,7 +7,6 @@
 //!
 //! Every adapter is a thread that talks to a [`bus::Bus`]: sources publish into
 //! `<stream>/raw`, sinks read `<stream>/perturbed`, and `perturbd` sits in between.
-#![warn(missing_docs)]
 
 pub mod adapter;
 pub mod bus;

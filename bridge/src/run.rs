@@ -237,6 +237,8 @@ extern "C" fn on_signal(_: libc::c_int) {
 }
 
 /// Makes SIGINT and SIGTERM set the stop flag instead of killing the process.
+// libc's signal.
+#[allow(unsafe_code)]
 pub fn install_signal_handlers() {
     // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
     unsafe {

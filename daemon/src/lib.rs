@@ -11,8 +11,6 @@
 //! The library exposes the configuration (used by the end-to-end tests and tools to find the
 //! services and QoS of a stream) and the pieces of the daemon.
 
-#![warn(missing_docs)]
-
 pub mod config;
 pub mod daemon;
 pub mod perturbation;

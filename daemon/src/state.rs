@@ -249,6 +249,8 @@ impl std::fmt::Debug for CounterCell {
 
 impl std::ops::Deref for CounterCell {
     type Target = Counters;
+    // The counters live in a shared memory-mapped file.
+    #[allow(unsafe_code)]
     fn deref(&self) -> &Counters {
         match self {
             CounterCell::Owned(b) => b,
@@ -330,6 +332,8 @@ impl CountersFile {
     /// Creates the counters file for `streams` at `path`, taking over what the previous run left
     /// there (see the module documentation). With `fresh`, the previous file is ignored.
     /// Streams whose name is longer than 128 bytes keep their counters in memory only.
+    // The counters live in a shared memory-mapped file.
+    #[allow(unsafe_code)]
     pub fn open(
         path: &Path,
         streams: &[StreamConfig],
@@ -405,6 +409,8 @@ impl CountersFile {
     }
 
     /// Marks the run as stopped cleanly (the report holds its final counts).
+    // The counters live in a shared memory-mapped file.
+    #[allow(unsafe_code)]
     pub fn mark_clean(&self) {
         // SAFETY: bytes 16..24 of the header belong to no stream's counters and are written by
         // this thread only, after the workers stopped.

@@ -9,8 +9,6 @@
 //! Start with [`perturber::CameraPerturber`] / [`perturber::LidarPerturber`] and
 //! [`registry::CATALOGUE`].
 
-#![warn(missing_docs)]
-
 pub mod bench;
 pub mod camera;
 pub mod cloud;

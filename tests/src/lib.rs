@@ -7,8 +7,6 @@
 //! The binaries of the other crates are found next to the test executable's target directory;
 //! build them first (`cargo build --workspace --bins`, the README's test command does).
 
-#![warn(missing_docs)]
-
 use perturb_wire::{FrameHeader, TransportOptions};
 use serde::{Deserialize, Serialize};
 use std::io::{BufRead, BufReader};
@@ -514,6 +512,8 @@ impl Ros1Master {
 
     /// Stops the master (SIGINT to its process group, SIGKILL after 10 s) and waits until the
     /// port is free.
+    // libc's kill on a process group.
+    #[allow(unsafe_code)]
     pub fn down(&mut self) {
         if let Some(mut c) = self.child.take() {
             let pgid = c.id() as i32;

@@ -889,6 +889,8 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
 /// every message published, also after the subscriber has left (its count was lost with its
 /// link before).
 #[test]
+// libc's kill and kill(0) liveness check.
+#[allow(unsafe_code)]
 fn ros1_slow_subscriber_drops_are_counted_and_add_up() {
     if !have_ros1() {
         return;

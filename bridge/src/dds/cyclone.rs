@@ -11,6 +11,9 @@
 //! Unless `CYCLONEDDS_URI` is set, the participant's domain is created with larger socket buffers
 //! and 64 kB datagrams (Cyclone's defaults lose multi-megabyte best-effort samples under load).
 
+// The FFI module: every call into libddsc is unsafe, each block says why it is sound.
+#![allow(unsafe_code)]
+
 use super::cyclone_types as ty;
 use super::interfaces::Interface;
 use super::{DdsBackend, DdsError, DdsReader, DdsWriter, Received, RosType, TopicSpec};
@@ -684,7 +687,7 @@ unsafe fn view<'a>(
     ty: RosType,
     sample: *const c_void,
 ) -> Result<Received<'a>, perturb_core::Error> {
-    // SAFETY (whole body): the caller guarantees `sample` is a valid loaned sample of `ty`,
+    // SAFETY: (the whole body) the caller guarantees `sample` is a valid loaned sample of `ty`,
     // whose strings and sequences Cyclone keeps alive until the loan is returned.
     unsafe {
         match ty {

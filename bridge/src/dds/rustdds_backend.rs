@@ -280,6 +280,8 @@ struct RustddsReader {
 // SAFETY: the reader is used from one thread at a time (the DdsReader trait takes `&mut self`);
 // RustDDS's SimpleDataReader holds its state behind Arc/Mutex and channels that are Send, and the
 // mio Poll is Send. The marker is needed because the adapter type parameters are not Sync.
+// A Send marker for RustDDS's reader.
+#[allow(unsafe_code)]
 unsafe impl Send for RustddsReader {}
 
 fn drain(

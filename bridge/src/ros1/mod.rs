@@ -107,6 +107,8 @@ impl Ros1Settings {
     }
 }
 
+// libc's gethostname.
+#[allow(unsafe_code)]
 fn machine_hostname() -> String {
     let mut buf = [0u8; 256];
     // SAFETY: gethostname writes at most buf.len() bytes into our buffer.

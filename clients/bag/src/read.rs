@@ -127,6 +127,8 @@ fn check_chunk_indexes(summary: &mcap::Summary, file_len: u64) -> Result<(), Str
     Ok(())
 }
 
+// A memory-mapped bag file.
+#[allow(unsafe_code)]
 fn map_file(path: &Path) -> Result<memmap2::Mmap, BagError> {
     let io = |source| BagError::Io {
         path: path.to_path_buf(),

@@ -69,14 +69,20 @@ enum Command {
     Ctl(ctl::Args),
 }
 
-fn main() {
-    // Behave like a Unix tool when the reader of stdout goes away (`perturb list | head`):
-    // exit quietly instead of panicking on a broken pipe.
+/// Behave like a Unix tool when the reader of stdout goes away (`perturb list | head`): exit
+/// quietly instead of panicking on a broken pipe.
+// libc's signal.
+#[allow(unsafe_code)]
+fn restore_sigpipe() {
     // SAFETY: restoring the default disposition of SIGPIPE before any thread is started.
     #[cfg(unix)]
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+}
+
+fn main() {
+    restore_sigpipe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::List(a) => list::run(a),

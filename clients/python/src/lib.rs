@@ -195,6 +195,8 @@ struct ImageIn<'py> {
 
 impl ImageIn<'_> {
     /// The pixels, borrowed from the array.
+    // numpy arrays: uninitialised output arrays and their slices.
+    #[allow(unsafe_code)]
     fn bytes(&self) -> &[u8] {
         let n = self.layout.span();
         if n == 0 {
@@ -327,6 +329,8 @@ impl CameraPerturber {
     /// pixel order of a 3- or 4-channel array (`rgb8` default, `bgr8` for OpenCV images,
     /// `rgba8`, `bgra8`).
     #[pyo3(signature = (image, seq = 0, *, format = None))]
+    // numpy arrays: uninitialised output arrays and their slices.
+    #[allow(unsafe_code)]
     fn __call__<'py>(
         &self,
         py: Python<'py>,
@@ -369,6 +373,8 @@ impl CameraPerturber {
     /// Perturbs `image` in place (it must be writable) and returns it. The frame is perturbed
     /// into a scratch buffer and copied back (one copy of the frame).
     #[pyo3(signature = (image, seq = 0, *, format = None))]
+    // numpy arrays: uninitialised output arrays and their slices.
+    #[allow(unsafe_code)]
     fn apply_<'py>(
         &self,
         py: Python<'py>,
@@ -496,6 +502,8 @@ struct CloudIn<'py> {
 }
 
 impl CloudIn<'_> {
+    // numpy arrays: uninitialised output arrays and their slices.
+    #[allow(unsafe_code)]
     fn bytes(&self) -> &[u8] {
         let len = self.n * self.k * 4;
         if len == 0 {
@@ -613,6 +621,8 @@ impl LidarPerturber {
 
     /// Returns the perturbed copy of `points` (frame sequence number `seq`).
     #[pyo3(signature = (points, seq = 0))]
+    // numpy arrays: uninitialised output arrays and their slices.
+    #[allow(unsafe_code)]
     fn __call__<'py>(
         &self,
         py: Python<'py>,

@@ -37,8 +37,6 @@
 //! }
 //! ```
 
-#![warn(missing_docs)]
-
 pub mod control;
 mod error;
 pub mod header;

@@ -16,6 +16,8 @@ use std::time::{Duration, Instant};
 ///     None => eprintln!("perturbd did not stop within 10 s and was killed"),
 /// }
 /// ```
+// libc's kill.
+#[allow(unsafe_code)]
 pub fn interrupt(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
     if let Ok(Some(status)) = child.try_wait() {
         return Some(status);

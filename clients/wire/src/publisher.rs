@@ -136,6 +136,8 @@ impl FrameLoan {
     ///
     /// The bytes hold whatever the memory held before (a previous frame, or zeros); write every
     /// byte you declare valid in [`FrameHeader::data_len`].
+    // iceoryx2's loans are uninitialised shared memory.
+    #[allow(unsafe_code)]
     pub fn payload_mut(&mut self) -> &mut [u8] {
         let p = self.sample.payload_mut();
         // SAFETY: the payload lies in a shared-memory mapping (an mmap of a POSIX shm object):
@@ -268,6 +270,8 @@ impl FramePublisher {
     /// Sends a filled loan, stamping this publisher's hop timestamp, and wakes the subscribers.
     /// Returns the number of subscribers reached. A transport failure recreates the ports once
     /// (the frame itself is lost and the error returned).
+    // iceoryx2's loans are uninitialised shared memory.
+    #[allow(unsafe_code)]
     pub fn send(&mut self, loan: FrameLoan) -> WireResult<usize> {
         // SAFETY: see `FrameLoan::payload_mut`: the shared memory is always initialised bytes.
         let mut sample = unsafe { loan.sample.assume_init() };

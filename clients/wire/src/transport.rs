@@ -254,6 +254,8 @@ pub mod names {
 
 /// CLOCK_MONOTONIC in nanoseconds: the clock every hop timestamp uses, comparable between all
 /// processes of the machine.
+// libc's clock_gettime.
+#[allow(unsafe_code)]
 pub fn monotonic_ns() -> u64 {
     let mut ts = libc::timespec {
         tv_sec: 0,

@@ -100,6 +100,8 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
 }
 
 /// CPU seconds (user + system) a process has used, from /proc.
+// libc's sysconf.
+#[allow(unsafe_code)]
 fn cpu_seconds(pid: u32) -> Option<f64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     let rest = &stat[stat.rfind(')')? + 2..];

@@ -59,6 +59,8 @@ macro_rules! wide_fn {
             #[inline(always)]
             fn base $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
+            // The crate's one unsafe operation: the SIMD dispatch.
+            #[allow(unsafe_code)]
             if $crate::camera::ops::wide_available() {
                 // SAFETY: the CPU has every feature the copy is compiled for (`wide_available`
                 // checked), which is all such a function needs.
