@@ -1,0 +1,295 @@
+//! The processing thread: checks each frame, perturbs it straight from the input sample into a
+//! loaned output sample and publishes it; bad frames and failures are counted, never fatal.
+
+use super::runtime::StreamRuntime;
+use super::{Item, TICK, should_log};
+use crate::perturbation::Active;
+use crate::stats::Counters;
+use crossbeam::channel::{Receiver, RecvTimeoutError};
+use perturb_core::registry::Modality;
+use perturb_wire::{Frame, FramePublisher, LayoutCache, WireError, WireModality, monotonic_ns};
+use std::sync::atomic::Ordering;
+use tracing::{debug, error, info, warn};
+
+pub(super) fn process_loop(
+    rt: &StreamRuntime,
+    mut publisher: FramePublisher,
+    rx: Receiver<Item>,
+    mut active: Option<Active>,
+) {
+    let name = rt.config.name.as_str();
+    let mut cache = LayoutCache::default();
+    loop {
+        let item = match rx.recv_timeout(TICK) {
+            Ok(i) => i,
+            // The receiver drops the sender when it stops (shutdown); the queue is drained first.
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        if let Some(change) = rt.take_pending() {
+            match &change {
+                Some(a) => info!(
+                    stream = name,
+                    id = a.spec().entry.id,
+                    severity = a.spec().severity,
+                    seed = a.spec().seed,
+                    seq = item.frame.header().seq,
+                    "perturbation active from this frame"
+                ),
+                None => info!(
+                    stream = name,
+                    seq = item.frame.header().seq,
+                    "perturbation off from this frame"
+                ),
+            }
+            active = change;
+        }
+        process_one(rt, &mut publisher, item, &mut active, &mut cache);
+    }
+    debug!(stream = name, "processor stopped");
+}
+
+/// Checks a received frame is one the stream can process: header and payload agree, the
+/// modality is the stream's, the image encoding is supported or the point layout is readable.
+pub(super) fn check(
+    modality: Modality,
+    frame: &Frame,
+    layouts: &mut LayoutCache,
+) -> Result<(), WireError> {
+    match modality {
+        Modality::Camera => frame.image().map(|_| ()),
+        Modality::Lidar => frame.cloud_cached(layouts).map(|_| ()),
+    }
+}
+
+pub(super) fn invalid(rt: &StreamRuntime, seq: u64, e: &WireError) {
+    let n = rt.stats.counters.invalid.fetch_add(1, Ordering::Relaxed) + 1;
+    if should_log(n) {
+        warn!(
+            stream = rt.config.name.as_str(),
+            seq,
+            invalid = n,
+            "invalid frame skipped: {e}"
+        );
+    }
+}
+
+fn failed(rt: &StreamRuntime, seq: u64, id: &str, e: &dyn std::fmt::Display) {
+    let n = rt
+        .stats
+        .counters
+        .perturb_failed
+        .fetch_add(1, Ordering::Relaxed)
+        + 1;
+    if should_log(n) {
+        warn!(
+            stream = rt.config.name.as_str(),
+            seq, id, "perturbation failed, frame forwarded unperturbed: {e}"
+        );
+    }
+}
+
+fn process_one(
+    rt: &StreamRuntime,
+    publisher: &mut FramePublisher,
+    item: Item,
+    active: &mut Option<Active>,
+    cache: &mut LayoutCache,
+) {
+    let Item { frame, t_rx } = item;
+    let h = *frame.header();
+    let want = match rt.config.modality {
+        Modality::Camera => WireModality::Camera,
+        Modality::Lidar => WireModality::Lidar,
+    };
+    match frame.validate() {
+        Ok(m) if m == want => {}
+        Ok(m) => {
+            let e = WireError::invalid(format!(
+                "a {} frame on a {} stream",
+                m.as_str(),
+                want.as_str()
+            ));
+            return invalid(rt, h.seq, &e);
+        }
+        Err(e) => return invalid(rt, h.seq, &e),
+    }
+    let t0 = monotonic_ns();
+    let loan = match want {
+        WireModality::Camera => camera(rt, publisher, &frame, &h, active),
+        WireModality::Lidar => lidar(rt, publisher, &frame, &h, active, cache),
+    };
+    let mut loan = match loan {
+        Ok(Some(l)) => l,
+        Ok(None) => return,
+        Err(e) => {
+            let n = rt
+                .stats
+                .counters
+                .dropped_output
+                .fetch_add(1, Ordering::Relaxed)
+                + 1;
+            if should_log(n) {
+                error!(
+                    stream = rt.config.name.as_str(),
+                    seq = h.seq,
+                    "frame dropped, no output sample: {e}"
+                );
+            }
+            return;
+        }
+    };
+    let t1 = monotonic_ns();
+    {
+        let hd = loan.header_mut();
+        hd.t_daemon_rx_ns = t_rx;
+        hd.t_daemon_tx_ns = monotonic_ns();
+    }
+    let t_tx = loan.header().t_daemon_tx_ns;
+    drop(frame); // hand the input sample back before publishing
+    let c = &rt.stats.counters;
+    match publisher.send(loan) {
+        Ok(_) => Counters::add(&c.frames_out, 1),
+        Err(e) => {
+            let n = c.dropped_output.fetch_add(1, Ordering::Relaxed) + 1;
+            if should_log(n) {
+                error!(
+                    stream = rt.config.name.as_str(),
+                    seq = h.seq,
+                    "publishing failed: {e}"
+                );
+            }
+            return;
+        }
+    }
+    let budget_ns = (rt.config.budget() * 1e6) as u64;
+    let mut lat = rt.stats.latencies.lock().unwrap_or_else(|p| p.into_inner());
+    lat.perturb.record(t1.saturating_sub(t0));
+    lat.rx_to_tx.record(t_tx.saturating_sub(t_rx));
+    let total = if h.t_ingress_ns != 0 && h.t_ingress_ns <= t_rx {
+        lat.ingress_to_rx.record(t_rx - h.t_ingress_ns);
+        lat.ingress_to_tx.record(t_tx - h.t_ingress_ns);
+        t_tx - h.t_ingress_ns
+    } else {
+        t_tx.saturating_sub(t_rx)
+    };
+    drop(lat);
+    if total > budget_ns {
+        let n = c.over_budget.fetch_add(1, Ordering::Relaxed) + 1;
+        if should_log(n) {
+            warn!(
+                stream = rt.config.name.as_str(),
+                seq = h.seq,
+                latency_ms = total as f64 / 1e6,
+                budget_ms = rt.config.budget(),
+                "frame over budget"
+            );
+        }
+    }
+}
+
+type Loan = perturb_wire::FrameLoan;
+
+/// Writes the output image into a loan: perturbed, or copied when off (or when the perturbation
+/// fails). `Ok(None)`: the frame was invalid and counted.
+fn camera(
+    rt: &StreamRuntime,
+    publisher: &FramePublisher,
+    frame: &Frame,
+    h: &perturb_wire::FrameHeader,
+    active: &mut Option<Active>,
+) -> Result<Option<Loan>, WireError> {
+    let input = match frame.image() {
+        Ok(v) => v,
+        Err(e) => {
+            invalid(rt, h.seq, &e);
+            return Ok(None);
+        }
+    };
+    let g = input.geometry();
+    {
+        let mut last = rt.geometry.lock().unwrap_or_else(|p| p.into_inner());
+        if *last != Some(g) {
+            *last = Some(g);
+        }
+    }
+    let len = h.data_len as usize;
+    let mut loan = publisher.loan(len.max(1))?;
+    *loan.header_mut() = *h;
+    loan.header_mut().set_applied(None);
+    let data = frame.data()?;
+    match active {
+        Some(Active::Camera(p)) => {
+            let result = {
+                let mut out = h.image_view_mut(loan.payload_mut())?;
+                rt.on_workers(|| p.apply(&input, &mut out, h.seq))
+            };
+            match result {
+                Ok(()) => {
+                    let out = loan.payload_mut();
+                    // Row padding is not image data: pass it through.
+                    let (step, row) = (h.step as usize, g.row_bytes());
+                    if step > row {
+                        for y in 0..(h.height as usize).saturating_sub(1) {
+                            let r = y * step + row..(y + 1) * step;
+                            out[r.clone()].copy_from_slice(&data[r]);
+                        }
+                    }
+                    let spec = p.spec();
+                    loan.header_mut().set_applied(Some(&spec));
+                }
+                Err(e) => {
+                    failed(rt, h.seq, p.spec().entry.id, &e);
+                    loan.payload_mut()[..len].copy_from_slice(data);
+                }
+            }
+        }
+        _ => loan.payload_mut()[..len].copy_from_slice(data),
+    }
+    Ok(Some(loan))
+}
+
+/// Writes the output cloud into a loan sized for the perturbation's worst case and records the
+/// size it produced.
+fn lidar(
+    rt: &StreamRuntime,
+    publisher: &FramePublisher,
+    frame: &Frame,
+    h: &perturb_wire::FrameHeader,
+    active: &mut Option<Active>,
+    cache: &mut LayoutCache,
+) -> Result<Option<Loan>, WireError> {
+    let input = match frame.cloud_cached(cache) {
+        Ok(v) => v,
+        Err(e) => {
+            invalid(rt, h.seq, &e);
+            return Ok(None);
+        }
+    };
+    let data = frame.data()?;
+    let len = data.len();
+    if let Some(Active::Lidar(p)) = active {
+        let max = p.max_output_bytes(&input);
+        let mut loan = publisher.loan(max.max(1))?;
+        *loan.header_mut() = *h;
+        let payload = loan.payload_mut();
+        match rt.on_workers(|| p.apply(&input, payload, h.seq, None)) {
+            Ok(shape) => {
+                let spec = p.spec();
+                let hd = loan.header_mut();
+                hd.width = shape.width;
+                hd.height = shape.height;
+                hd.row_step = shape.row_step as u32;
+                hd.data_len = shape.bytes as u64;
+                hd.set_applied(Some(&spec));
+                return Ok(Some(loan));
+            }
+            Err(e) => failed(rt, h.seq, p.spec().entry.id, &e),
+        }
+    }
+    let mut loan = publisher.loan(len.max(1))?;
+    *loan.header_mut() = *h;
+    loan.header_mut().set_applied(None);
+    loan.payload_mut()[..len].copy_from_slice(data);
+    Ok(Some(loan))
+}
