@@ -4,8 +4,6 @@
 
 use crate::perturbation::{self, Active};
 pub use crate::stream::{MAX_STREAM_THREADS, PerturbationConfig, StreamConfig};
-use perturb_core::registry::Modality;
-use perturb_core::sensor_model::SensorModel;
 use perturb_wire::{TransportOptions, names};
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
@@ -87,6 +85,26 @@ impl Config {
 
     /// Checks every value; the error starts with the key (`streams[1] (cam_left).budget_ms`).
     pub fn validate(&self) -> Result<(), String> {
+        self.validate_daemon()?;
+        if self.streams.is_empty() {
+            return Err("streams: no [[streams]] configured; perturbd needs at least one".into());
+        }
+        let mut seen = Seen::default();
+        for (i, s) in self.streams.iter().enumerate() {
+            let key = |k: &str| format!("streams[{i}] ({}).{k}", s.name);
+            seen.claim(i, s)?;
+            s.validate_settings(&key)?;
+            if let Some(p) = &s.perturbation {
+                let built: Result<Active, String> =
+                    perturbation::build(s, &p.id, p.severity, p.seed, None).map(|(_, a)| a);
+                built.map_err(|e| format!("{}: {e}", key("perturbation")))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// `[daemon]` and `[transport]`.
+    fn validate_daemon(&self) -> Result<(), String> {
         let d = &self.daemon;
         if d.control_service.is_empty() || d.control_service.len() > 255 {
             return Err("daemon.control_service: must be 1..=255 bytes".into());
@@ -107,132 +125,60 @@ impl Config {
                 "transport.prefix: `{p}` must be non-empty letters, digits, `_`, `-` or `.`"
             ));
         }
-        if self.streams.is_empty() {
-            return Err("streams: no [[streams]] configured; perturbd needs at least one".into());
+        Ok(())
+    }
+}
+
+/// The names and services of the streams checked so far: each belongs to one stream.
+#[derive(Default)]
+struct Seen {
+    names: HashSet<String>,
+    inputs: HashSet<String>,
+    outputs: HashSet<String>,
+}
+
+impl Seen {
+    /// Checks stream `i`'s name and services, and that no earlier stream has them.
+    fn claim(&mut self, i: usize, s: &StreamConfig) -> Result<(), String> {
+        let key = |k: &str| format!("streams[{i}] ({}).{k}", s.name);
+        if s.name.is_empty()
+            || s.name.len() > 200
+            || s.name.chars().any(|c| c.is_whitespace() || c.is_control())
+        {
+            return Err(format!(
+                "streams[{i}].name: `{}` must be 1..=200 bytes without spaces",
+                s.name
+            ));
         }
-        let mut names_seen = HashSet::new();
-        let mut outputs = HashSet::new();
-        let mut inputs = HashSet::new();
-        for (i, s) in self.streams.iter().enumerate() {
-            let key = |k: &str| format!("streams[{i}] ({}).{k}", s.name);
-            if s.name.is_empty()
-                || s.name.len() > 200
-                || s.name.chars().any(|c| c.is_whitespace() || c.is_control())
-            {
-                return Err(format!(
-                    "streams[{i}].name: `{}` must be 1..=200 bytes without spaces",
-                    s.name
-                ));
+        if !self.names.insert(s.name.clone()) {
+            return Err(format!(
+                "streams[{i}].name: `{}` is used by two streams",
+                s.name
+            ));
+        }
+        let (input, output) = (s.input_service(), s.output_service());
+        for (k, v) in [("input", &input), ("output", &output)] {
+            if v.is_empty() || v.len() > 255 {
+                return Err(format!("{}: `{v}` must be 1..=255 bytes", key(k)));
             }
-            if !names_seen.insert(s.name.as_str()) {
-                return Err(format!(
-                    "streams[{i}].name: `{}` is used by two streams",
-                    s.name
-                ));
-            }
-            let (input, output) = (s.input_service(), s.output_service());
-            for (k, v) in [("input", &input), ("output", &output)] {
-                if v.is_empty() || v.len() > 255 {
-                    return Err(format!("{}: `{v}` must be 1..=255 bytes", key(k)));
-                }
-            }
-            if input == output {
-                return Err(format!(
-                    "{}: `{output}` is also the input; the daemon would read its own output",
-                    key("output")
-                ));
-            }
-            if !outputs.insert(output.clone()) {
-                return Err(format!(
-                    "{}: `{output}` is the output of another stream",
-                    key("output")
-                ));
-            }
-            if !inputs.insert(input.clone()) {
-                return Err(format!(
-                    "{}: `{input}` is the input of another stream",
-                    key("input")
-                ));
-            }
-            if let Some(b) = s.budget_ms
-                && !(b > 0.0 && b.is_finite())
-            {
-                return Err(format!(
-                    "{}: {b} must be a positive number",
-                    key("budget_ms")
-                ));
-            }
-            if !(1..=2).contains(&s.queue_depth) {
-                return Err(format!(
-                    "{}: {} must be 1 or 2",
-                    key("queue_depth"),
-                    s.queue_depth
-                ));
-            }
-            if let Some(n) = s.threads
-                && !(1..=MAX_STREAM_THREADS).contains(&n)
-            {
-                return Err(format!(
-                    "{}: {n} must be between 1 and {MAX_STREAM_THREADS}",
-                    key("threads")
-                ));
-            }
-            s.qos
-                .validate()
-                .map_err(|e| format!("{}: {e}", key("qos")))?;
-            if s.qos.subscriber_borrowed < s.queue_depth + 2 {
-                return Err(format!(
-                    "{}: {} is too small for queue_depth {}: the daemon holds queue_depth + 2 frames, set it to at least {}",
-                    key("qos.subscriber_borrowed"),
-                    s.qos.subscriber_borrowed,
-                    s.queue_depth,
-                    s.queue_depth + 2
-                ));
-            }
-            match s.modality {
-                Modality::Camera => {
-                    if s.sensor.is_some() {
-                        return Err(format!(
-                            "{}: only LiDAR streams have a sensor model",
-                            key("sensor")
-                        ));
-                    }
-                    if s.intensity_max.is_some() {
-                        return Err(format!(
-                            "{}: only LiDAR streams have an intensity scale",
-                            key("intensity_max")
-                        ));
-                    }
-                    for (k, v) in [("forward", &s.forward), ("up", &s.up)] {
-                        if v.is_some() {
-                            return Err(format!("{}: only LiDAR streams have axes", key(k)));
-                        }
-                    }
-                }
-                Modality::Lidar => {
-                    if s.sensor.is_none() {
-                        return Err(format!(
-                            "{}: missing; a LiDAR stream needs its sensor model (vlp32c, vlp16, hdl32e or hdl64e)",
-                            key("sensor")
-                        ));
-                    }
-                    SensorModel::by_name(s.sensor.as_deref().unwrap_or("vlp32c"))
-                        .map_err(|e| format!("{}: {e}", key("sensor")))?;
-                    s.axes_by_key()
-                        .map_err(|(k, e)| format!("{}: {e}", key(k)))?;
-                    if let Some(m) = s.intensity_max
-                        && m != 1.0
-                        && m != 255.0
-                    {
-                        return Err(format!("{}: {m} must be 1 or 255", key("intensity_max")));
-                    }
-                }
-            }
-            if let Some(p) = &s.perturbation {
-                let built: Result<Active, String> =
-                    perturbation::build(s, &p.id, p.severity, p.seed, None).map(|(_, a)| a);
-                built.map_err(|e| format!("{}: {e}", key("perturbation")))?;
-            }
+        }
+        if input == output {
+            return Err(format!(
+                "{}: `{output}` is also the input; the daemon would read its own output",
+                key("output")
+            ));
+        }
+        if !self.outputs.insert(output.clone()) {
+            return Err(format!(
+                "{}: `{output}` is the output of another stream",
+                key("output")
+            ));
+        }
+        if !self.inputs.insert(input.clone()) {
+            return Err(format!(
+                "{}: `{input}` is the input of another stream",
+                key("input")
+            ));
         }
         Ok(())
     }
@@ -241,6 +187,7 @@ impl Config {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use perturb_core::sensor_model::SensorModel;
 
     const GOOD: &str = r#"
         [[streams]]

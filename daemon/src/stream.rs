@@ -111,6 +111,86 @@ impl StreamConfig {
         self.axes_by_key().map_err(|(_, e)| e)
     }
 
+    /// Checks this stream's own settings (budget, queue, threads, QoS, the sensor of a LiDAR
+    /// stream); `key(k)` names key `k` of this stream in an error.
+    pub(crate) fn validate_settings(&self, key: &dyn Fn(&str) -> String) -> Result<(), String> {
+        if let Some(b) = self.budget_ms
+            && !(b > 0.0 && b.is_finite())
+        {
+            return Err(format!(
+                "{}: {b} must be a positive number",
+                key("budget_ms")
+            ));
+        }
+        if !(1..=2).contains(&self.queue_depth) {
+            return Err(format!(
+                "{}: {} must be 1 or 2",
+                key("queue_depth"),
+                self.queue_depth
+            ));
+        }
+        if let Some(n) = self.threads
+            && !(1..=MAX_STREAM_THREADS).contains(&n)
+        {
+            return Err(format!(
+                "{}: {n} must be between 1 and {MAX_STREAM_THREADS}",
+                key("threads")
+            ));
+        }
+        self.qos
+            .validate()
+            .map_err(|e| format!("{}: {e}", key("qos")))?;
+        if self.qos.subscriber_borrowed < self.queue_depth + 2 {
+            return Err(format!(
+                "{}: {} is too small for queue_depth {}: the daemon holds queue_depth + 2 frames, set it to at least {}",
+                key("qos.subscriber_borrowed"),
+                self.qos.subscriber_borrowed,
+                self.queue_depth,
+                self.queue_depth + 2
+            ));
+        }
+        match self.modality {
+            Modality::Camera => {
+                if self.sensor.is_some() {
+                    return Err(format!(
+                        "{}: only LiDAR streams have a sensor model",
+                        key("sensor")
+                    ));
+                }
+                if self.intensity_max.is_some() {
+                    return Err(format!(
+                        "{}: only LiDAR streams have an intensity scale",
+                        key("intensity_max")
+                    ));
+                }
+                for (k, v) in [("forward", &self.forward), ("up", &self.up)] {
+                    if v.is_some() {
+                        return Err(format!("{}: only LiDAR streams have axes", key(k)));
+                    }
+                }
+            }
+            Modality::Lidar => {
+                if self.sensor.is_none() {
+                    return Err(format!(
+                        "{}: missing; a LiDAR stream needs its sensor model (vlp32c, vlp16, hdl32e or hdl64e)",
+                        key("sensor")
+                    ));
+                }
+                SensorModel::by_name(self.sensor.as_deref().unwrap_or("vlp32c"))
+                    .map_err(|e| format!("{}: {e}", key("sensor")))?;
+                self.axes_by_key()
+                    .map_err(|(k, e)| format!("{}: {e}", key(k)))?;
+                if let Some(m) = self.intensity_max
+                    && m != 1.0
+                    && m != 255.0
+                {
+                    return Err(format!("{}: {m} must be 1 or 255", key("intensity_max")));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Like [`StreamConfig::axes`], the error with the key it is about.
     pub(crate) fn axes_by_key(&self) -> Result<Axes, (&'static str, String)> {
         let parse = |key: &'static str, v: Option<&str>, default: Axis| {
