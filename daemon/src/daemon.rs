@@ -2,7 +2,7 @@
 //! workers, serve the control channel and log statistics until SIGINT/SIGTERM, then stop the
 //! workers, write the JSON report and exit.
 
-use crate::config::Config;
+use crate::config::{Config, StreamConfig};
 use crate::perturbation::{self, Active};
 use crate::state::{self, CountersFile, RuntimeState, StatePaths};
 use crate::worker::{self, StreamRuntime};
@@ -12,7 +12,7 @@ use perturb_wire::control::{
 };
 use perturb_wire::iceoryx2::prelude::*;
 use perturb_wire::iceoryx2::waitset::WaitSetRunResult;
-use perturb_wire::{Hop, Ipc, Transport, TransportOptions};
+use perturb_wire::{FramePublisher, FrameSubscriber, Hop, Ipc, Transport, TransportOptions};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -49,153 +49,24 @@ pub fn run(
         .map(|d| d.as_secs_f64())
         .unwrap_or(0.0);
     let options: TransportOptions = cfg.transport.clone().with_env_overrides();
-    let transport = Transport::open("perturbd", &options)?;
-    info!(
-        config = %config_path.display(),
-        namespace = %options.describe(),
-        streams = cfg.streams.len(),
-        "perturbd starting"
-    );
-
-    let sweep = transport.sweep_dead_nodes()?;
-    if sweep.removed > 0 || sweep.failed > 0 {
-        info!(
-            removed = sweep.removed,
-            failed = sweep.failed,
-            alive = sweep.alive,
-            "removed stale shared memory of dead processes"
-        );
-    }
-
+    let transport = open_transport(config_path, &cfg, &options)?;
     let control_service = cfg.daemon.control_service.as_str();
-    if let Ok(client) = ControlClient::connect(&transport, control_service)
-        && client
-            .request(&ControlRequest::Status, Duration::from_millis(500))
-            .is_ok()
-    {
-        anyhow::bail!(
-            "another perturbd already serves `{control_service}` in this iceoryx2 namespace ({}); stop it first",
-            options.describe()
-        );
-    }
-    let server = ControlServer::create(&transport, control_service)?;
-
+    let server = claim_control(&transport, control_service, &options)?;
     let report_path = report_path
         .or(cfg.daemon.report.clone())
         .unwrap_or_else(|| PathBuf::from("perturbd-report.json"));
     let paths = StatePaths::for_report(&report_path);
-    let saved = if fresh {
-        info!(state = %paths.runtime.display(), "--fresh: the runtime state and counters of the last run are ignored");
-        None
-    } else {
-        match RuntimeState::load(&paths.runtime) {
-            Ok(s) => s,
-            Err(e) => {
-                warn!("{e}; starting from the configuration");
-                None
-            }
-        }
-    };
-    let counters = match CountersFile::open(&paths.counters, &cfg.streams, fresh) {
-        Ok((f, carried)) => {
-            for (stream, lost) in &carried.after_crash {
-                warn!(
-                    stream = stream.as_str(),
-                    lost_in_flight = lost,
-                    counters = %paths.counters.display(),
-                    "the last perturbd did not stop cleanly: its counters carry on, and the frames it had taken in but not published are counted as dropped_restart"
-                );
-            }
-            Some(f)
-        }
-        Err(e) => {
-            warn!(
-                counters = %paths.counters.display(),
-                "cannot keep the counters in a file ({e}): they live in memory only and a restart will not know where the streams were"
-            );
-            None
-        }
-    };
+    let saved = load_saved(&paths, fresh);
+    let counters = open_counters(&paths, &cfg, fresh);
 
     // Open every stream's services before starting any worker, so a bad stream stops the
-    // daemon before it touches the others. The output goes first: once the input has its
-    // subscriber (what a publisher waits for), the output is ready too.
+    // daemon before it touches the others.
     let shutdown = Arc::new(AtomicBool::new(false));
     let mut streams = Vec::new();
     let mut ports = Vec::new();
     for s in &cfg.streams {
-        let restored = saved.as_ref().and_then(|st| st.restore_for(s));
-        let wanted = match &restored {
-            Some(r) => r.clone(),
-            None => state::configured(s),
-        };
-        let initial: Option<Active> = match &wanted {
-            Some(p) => Some(
-                perturbation::build(s, &p.id, p.severity, p.seed, None)
-                    .map(|(_, a)| a)
-                    .map_err(|e| anyhow::anyhow!("stream `{}`: {e}", s.name))?,
-            ),
-            None => None,
-        };
-        if let Some(r) = &restored
-            && *r != state::configured(s)
-        {
-            let what = |p: &Option<state::Saved>| match p {
-                Some(p) => format!("{} severity {} seed {}", p.id, p.severity, p.seed),
-                None => "off".into(),
-            };
-            info!(
-                stream = s.name.as_str(),
-                runtime = what(r).as_str(),
-                configured = what(&state::configured(s)).as_str(),
-                state = %paths.runtime.display(),
-                "restored the perturbation set at runtime before the restart (--fresh starts from the configuration)"
-            );
-        }
-        if restored.is_none()
-            && let Some(st) = saved.as_ref().and_then(|st| st.streams.get(&s.name))
-            && st.active != state::configured(s)
-        {
-            info!(
-                stream = s.name.as_str(),
-                state = %paths.runtime.display(),
-                "the configuration's perturbation changed since the runtime state was saved: the configuration wins"
-            );
-        }
-        let output = transport
-            .publisher(&s.output_service(), &s.qos, Hop::Keep, 1)
-            .map_err(|e| anyhow::anyhow!("stream `{}` output: {e}", s.name))?;
-        let input = transport
-            .subscriber(&s.input_service(), &s.qos, None)
-            .map_err(|e| anyhow::anyhow!("stream `{}` input: {e}", s.name))?;
-        let cell = counters
-            .as_ref()
-            .and_then(|f| f.cell(&s.name))
-            .unwrap_or_default();
-        let rt = Arc::new(
-            StreamRuntime::new(s.clone(), initial.as_ref().map(|a| a.spec()), cell)
-                .map_err(|e| anyhow::anyhow!("stream `{}` worker threads: {e}", s.name))?,
-        );
-        info!(
-            stream = s.name.as_str(),
-            modality = s.modality.as_str(),
-            input = %s.input_service(),
-            output = %s.output_service(),
-            sensor = match s.modality {
-                Modality::Lidar => s
-                    .sensor_model()
-                    .map(|m| m.describe())
-                    .unwrap_or_else(|e| e),
-                Modality::Camera => "-".to_string(),
-            },
-            perturbation = initial
-                .as_ref()
-                .map(|a| format!("{} severity {} seed {}", a.spec().entry.id, a.spec().severity, a.spec().seed))
-                .unwrap_or_else(|| "off".into()),
-            budget_ms = s.budget(),
-            worker_threads = rt.worker_threads(),
-            "stream configured"
-        );
+        let initial = initial_perturbation(s, saved.as_ref(), &paths)?;
+        let (rt, input, output) = open_stream(&transport, s, &initial, counters.as_ref())?;
         ports.push((rt.clone(), input, output, initial));
         streams.push(rt);
     }
@@ -225,14 +96,193 @@ pub fn run(
         stopped_by,
         streams: streams.iter().map(|s| s.report(true)).collect(),
     };
-    let path = report_path;
-    let json = serde_json::to_string_pretty(&report_value(&report))?;
-    std::fs::write(&path, json + "\n")
-        .map_err(|e| anyhow::anyhow!("cannot write the report {}: {e}", path.display()))?;
-    info!(report = %path.display(), "report written");
+    write_report(&report_path, &report)?;
     if let Some(c) = &counters {
         c.mark_clean();
     }
+    Ok(())
+}
+
+/// Opens the iceoryx2 node and removes the shared memory dead processes left behind.
+fn open_transport(
+    config_path: &Path,
+    cfg: &Config,
+    options: &TransportOptions,
+) -> anyhow::Result<Transport> {
+    let transport = Transport::open("perturbd", options)?;
+    info!(
+        config = %config_path.display(),
+        namespace = %options.describe(),
+        streams = cfg.streams.len(),
+        "perturbd starting"
+    );
+    let sweep = transport.sweep_dead_nodes()?;
+    if sweep.removed > 0 || sweep.failed > 0 {
+        info!(
+            removed = sweep.removed,
+            failed = sweep.failed,
+            alive = sweep.alive,
+            "removed stale shared memory of dead processes"
+        );
+    }
+    Ok(transport)
+}
+
+/// Creates the control service; refuses when another perturbd already answers on it.
+fn claim_control(
+    transport: &Transport,
+    control_service: &str,
+    options: &TransportOptions,
+) -> anyhow::Result<ControlServer> {
+    if let Ok(client) = ControlClient::connect(transport, control_service)
+        && client
+            .request(&ControlRequest::Status, Duration::from_millis(500))
+            .is_ok()
+    {
+        anyhow::bail!(
+            "another perturbd already serves `{control_service}` in this iceoryx2 namespace ({}); stop it first",
+            options.describe()
+        );
+    }
+    Ok(ControlServer::create(transport, control_service)?)
+}
+
+/// The runtime state the last run saved (None with `--fresh`, or when it cannot be read).
+fn load_saved(paths: &StatePaths, fresh: bool) -> Option<RuntimeState> {
+    if fresh {
+        info!(state = %paths.runtime.display(), "--fresh: the runtime state and counters of the last run are ignored");
+        return None;
+    }
+    match RuntimeState::load(&paths.runtime) {
+        Ok(s) => s,
+        Err(e) => {
+            warn!("{e}; starting from the configuration");
+            None
+        }
+    }
+}
+
+/// The counters file, carried on from the last run unless `fresh`; None (counters in memory
+/// only) when it cannot be kept.
+fn open_counters(paths: &StatePaths, cfg: &Config, fresh: bool) -> Option<CountersFile> {
+    match CountersFile::open(&paths.counters, &cfg.streams, fresh) {
+        Ok((f, carried)) => {
+            for (stream, lost) in &carried.after_crash {
+                warn!(
+                    stream = stream.as_str(),
+                    lost_in_flight = lost,
+                    counters = %paths.counters.display(),
+                    "the last perturbd did not stop cleanly: its counters carry on, and the frames it had taken in but not published are counted as dropped_restart"
+                );
+            }
+            Some(f)
+        }
+        Err(e) => {
+            warn!(
+                counters = %paths.counters.display(),
+                "cannot keep the counters in a file ({e}): they live in memory only and a restart will not know where the streams were"
+            );
+            None
+        }
+    }
+}
+
+/// The perturbation stream `s` starts with: the one set at runtime before a restart, if the
+/// saved state still applies, else the configured one (each change said in the log).
+fn initial_perturbation(
+    s: &StreamConfig,
+    saved: Option<&RuntimeState>,
+    paths: &StatePaths,
+) -> anyhow::Result<Option<Active>> {
+    let restored = saved.and_then(|st| st.restore_for(s));
+    let wanted = match &restored {
+        Some(r) => r.clone(),
+        None => state::configured(s),
+    };
+    let initial: Option<Active> = match &wanted {
+        Some(p) => Some(
+            perturbation::build(s, &p.id, p.severity, p.seed, None)
+                .map(|(_, a)| a)
+                .map_err(|e| anyhow::anyhow!("stream `{}`: {e}", s.name))?,
+        ),
+        None => None,
+    };
+    if let Some(r) = &restored
+        && *r != state::configured(s)
+    {
+        let what = |p: &Option<state::Saved>| match p {
+            Some(p) => format!("{} severity {} seed {}", p.id, p.severity, p.seed),
+            None => "off".into(),
+        };
+        info!(
+            stream = s.name.as_str(),
+            runtime = what(r).as_str(),
+            configured = what(&state::configured(s)).as_str(),
+            state = %paths.runtime.display(),
+            "restored the perturbation set at runtime before the restart (--fresh starts from the configuration)"
+        );
+    }
+    if restored.is_none()
+        && let Some(st) = saved.and_then(|st| st.streams.get(&s.name))
+        && st.active != state::configured(s)
+    {
+        info!(
+            stream = s.name.as_str(),
+            state = %paths.runtime.display(),
+            "the configuration's perturbation changed since the runtime state was saved: the configuration wins"
+        );
+    }
+    Ok(initial)
+}
+
+/// Opens stream `s`'s output and input services (the output first: once the input has its
+/// subscriber, what a publisher waits for, the output is ready too) and its runtime state.
+fn open_stream(
+    transport: &Transport,
+    s: &StreamConfig,
+    initial: &Option<Active>,
+    counters: Option<&CountersFile>,
+) -> anyhow::Result<(Arc<StreamRuntime>, FrameSubscriber, FramePublisher)> {
+    let output = transport
+        .publisher(&s.output_service(), &s.qos, Hop::Keep, 1)
+        .map_err(|e| anyhow::anyhow!("stream `{}` output: {e}", s.name))?;
+    let input = transport
+        .subscriber(&s.input_service(), &s.qos, None)
+        .map_err(|e| anyhow::anyhow!("stream `{}` input: {e}", s.name))?;
+    let cell = counters.and_then(|f| f.cell(&s.name)).unwrap_or_default();
+    let rt = Arc::new(
+        StreamRuntime::new(s.clone(), initial.as_ref().map(|a| a.spec()), cell)
+            .map_err(|e| anyhow::anyhow!("stream `{}` worker threads: {e}", s.name))?,
+    );
+    info!(
+        stream = s.name.as_str(),
+        modality = s.modality.as_str(),
+        input = %s.input_service(),
+        output = %s.output_service(),
+        sensor = match s.modality {
+            Modality::Lidar => s
+                .sensor_model()
+                .map(|m| m.describe())
+                .unwrap_or_else(|e| e),
+            Modality::Camera => "-".to_string(),
+        },
+        perturbation = initial
+            .as_ref()
+            .map(|a| format!("{} severity {} seed {}", a.spec().entry.id, a.spec().severity, a.spec().seed))
+            .unwrap_or_else(|| "off".into()),
+        budget_ms = s.budget(),
+        worker_threads = rt.worker_threads(),
+        "stream configured"
+    );
+    Ok((rt, input, output))
+}
+
+/// Writes the JSON report at `path`.
+fn write_report(path: &Path, report: &Report) -> anyhow::Result<()> {
+    let json = serde_json::to_string_pretty(&report_value(report))?;
+    std::fs::write(path, json + "\n")
+        .map_err(|e| anyhow::anyhow!("cannot write the report {}: {e}", path.display()))?;
+    info!(report = %path.display(), "report written");
     Ok(())
 }
 
