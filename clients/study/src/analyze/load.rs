@@ -3,7 +3,7 @@
 
 use super::{AnalyzeConfig, Condition, ObjectsFrame, TopicField};
 use crate::error::{Result, StudyError};
-use crate::source::{RunEntry, TopicSchema, open_run};
+use crate::source::{RunEntry, RunMessage, TopicSchema, open_run};
 use perturb_bag::dynamic::{DynError, FieldPath, MessageCodec, Value};
 use perturb_bag::events::PerturbationEvent;
 use std::collections::BTreeMap;
@@ -278,175 +278,272 @@ fn objects_reader(
 /// missing pose topic, a field path the message type does not have, an unreadable bag.
 pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
     let run = entry.name.as_str();
-    let bag = open_run(&entry.path).map_err(|e| StudyError::Run {
+    let failed = |e: &dyn std::fmt::Display| StudyError::Run {
         run: run.to_string(),
         reason: e.to_string(),
-    })?;
-    let topics = bag.topics().map_err(|e| StudyError::Run {
-        run: run.to_string(),
-        reason: e.to_string(),
-    })?;
+    };
+    let bag = open_run(&entry.path).map_err(|e| failed(&e))?;
+    let topics = bag.topics().map_err(|e| failed(&e))?;
     let mut notes = Vec::new();
-    if cfg.route.is_some() && cfg.pose.is_none() {
-        return Err(StudyError::Config(
-            "a route needs a pose topic (--pose-topic) to follow the vehicle".into(),
-        ));
+    let readers = Readers::open(run, &topics, cfg, &mut notes)?;
+    let wanted = readers.topics();
+    let mut c = Collector {
+        cfg,
+        readers: &readers,
+        d: RunData {
+            name: entry.name.clone(),
+            group: entry.group.clone(),
+            objects_frame: cfg.objects.as_ref().map(|o| o.frame).unwrap_or_default(),
+            ..RunData::default()
+        },
+        t0: None,
+        last: 0,
+        bad: BTreeMap::new(),
+        stream_state: BTreeMap::new(),
+        other_streams: BTreeMap::new(),
+        current: None,
+    };
+    let damage = bag
+        .read(&wanted, &mut |m| {
+            c.message(m);
+            Ok(())
+        })
+        .map_err(|e| failed(&e))?;
+    if let Some(dmg) = damage {
+        notes.push(format!("the bag is damaged; read up to the damage: {dmg}"));
     }
-    let pose = cfg
-        .pose
-        .as_ref()
-        .map(|p| pose_reader(run, &topics, p))
-        .transpose()?;
-    // A run without the steering or objects topic (a LiDAR run has no steering command of an
-    // end-to-end model, a camera run no detections) has no jitter or coverage, with a note.
-    let has = |topic: &str| topics.iter().any(|t| t.topic == topic);
-    let steering = match &cfg.steering {
-        Some(s) if has(&s.topic) => Some(scalar_reader(
-            run,
-            &topics,
-            s,
-            "steering",
-            default_steering_field,
-            true,
-        )?),
-        Some(s) => {
-            notes.push(format!("no steering topic `{}`: no jitter", s.topic));
-            None
+    c.finish(run, &wanted, notes)
+}
+
+/// The readers of the configured topics a run has.
+struct Readers {
+    pose: Option<PoseReader>,
+    steering: Option<ScalarReader>,
+    objects: Option<ObjectsReader>,
+    takeover: Option<ScalarReader>,
+    collision: Option<ScalarReader>,
+    events: Option<Reader>,
+    events_data: Option<FieldPath>,
+}
+
+impl Readers {
+    /// The readers of `cfg`'s topics among the run's `topics`; a topic the run does not have is
+    /// a note (no jitter, no coverage, no signal, all nominal), except the pose topic.
+    fn open(
+        run: &str,
+        topics: &[TopicSchema],
+        cfg: &AnalyzeConfig,
+        notes: &mut Vec<String>,
+    ) -> Result<Readers> {
+        if cfg.route.is_some() && cfg.pose.is_none() {
+            return Err(StudyError::Config(
+                "a route needs a pose topic (--pose-topic) to follow the vehicle".into(),
+            ));
         }
-        None => None,
-    };
-    let objects = match &cfg.objects {
-        Some(o) if has(&o.topic) => Some(objects_reader(run, &topics, o)?),
-        Some(o) => {
-            notes.push(format!("no objects topic `{}`: no coverage", o.topic));
-            None
-        }
-        None => None,
-    };
-    // A missing takeover or collision topic means the signal never fired (a recorder only
-    // writes topics that had messages).
-    let mut flag = |cfg: &Option<TopicField>, what: &str| -> Result<Option<ScalarReader>> {
-        match cfg {
-            Some(c) if topics.iter().any(|t| t.topic == c.topic) => Ok(Some(scalar_reader(
+        let pose = cfg
+            .pose
+            .as_ref()
+            .map(|p| pose_reader(run, topics, p))
+            .transpose()?;
+        // A run without the steering or objects topic (a LiDAR run has no steering command of an
+        // end-to-end model, a camera run no detections) has no jitter or coverage, with a note.
+        let has = |topic: &str| topics.iter().any(|t| t.topic == topic);
+        let steering = match &cfg.steering {
+            Some(s) if has(&s.topic) => Some(scalar_reader(
                 run,
-                &topics,
-                c,
-                what,
-                default_flag_field,
-                false,
-            )?)),
-            Some(c) => {
-                notes.push(format!("no `{}` topic: no {what} signal", c.topic));
-                Ok(None)
+                topics,
+                s,
+                "steering",
+                default_steering_field,
+                true,
+            )?),
+            Some(s) => {
+                notes.push(format!("no steering topic `{}`: no jitter", s.topic));
+                None
             }
-            None => Ok(None),
-        }
-    };
-    let takeover = flag(&cfg.takeover, "takeover")?;
-    let collision = flag(&cfg.collision, "collision")?;
-    let events = if topics.iter().any(|t| t.topic == cfg.events_topic) {
-        Some(reader(run, &topics, &cfg.events_topic, "events")?)
-    } else {
-        notes.push(format!(
-            "no `{}` topic: the whole run counts as nominal",
-            cfg.events_topic
-        ));
-        None
-    };
-    let events_data = events.as_ref().map(|e| e.path(run, "data")).transpose()?;
-
-    let mut wanted: Vec<String> = Vec::new();
-    for r in [
-        pose.as_ref().map(|p| &p.r),
-        steering.as_ref().map(|s| &s.r),
-        objects.as_ref().map(|o| &o.r),
-        takeover.as_ref().map(|s| &s.r),
-        collision.as_ref().map(|s| &s.r),
-        events.as_ref(),
-    ]
-    .into_iter()
-    .flatten()
-    {
-        if !wanted.contains(&r.topic) {
-            wanted.push(r.topic.clone());
-        }
+            None => None,
+        };
+        let objects = match &cfg.objects {
+            Some(o) if has(&o.topic) => Some(objects_reader(run, topics, o)?),
+            Some(o) => {
+                notes.push(format!("no objects topic `{}`: no coverage", o.topic));
+                None
+            }
+            None => None,
+        };
+        // A missing takeover or collision topic means the signal never fired (a recorder only
+        // writes topics that had messages).
+        let mut flag = |cfg: &Option<TopicField>, what: &str| -> Result<Option<ScalarReader>> {
+            match cfg {
+                Some(c) if has(&c.topic) => Ok(Some(scalar_reader(
+                    run,
+                    topics,
+                    c,
+                    what,
+                    default_flag_field,
+                    false,
+                )?)),
+                Some(c) => {
+                    notes.push(format!("no `{}` topic: no {what} signal", c.topic));
+                    Ok(None)
+                }
+                None => Ok(None),
+            }
+        };
+        let takeover = flag(&cfg.takeover, "takeover")?;
+        let collision = flag(&cfg.collision, "collision")?;
+        let events = if has(&cfg.events_topic) {
+            Some(reader(run, topics, &cfg.events_topic, "events")?)
+        } else {
+            notes.push(format!(
+                "no `{}` topic: the whole run counts as nominal",
+                cfg.events_topic
+            ));
+            None
+        };
+        let events_data = events.as_ref().map(|e| e.path(run, "data")).transpose()?;
+        Ok(Readers {
+            pose,
+            steering,
+            objects,
+            takeover,
+            collision,
+            events,
+            events_data,
+        })
     }
 
-    let mut d = RunData {
-        name: entry.name.clone(),
-        group: entry.group.clone(),
-        objects_frame: cfg.objects.as_ref().map(|o| o.frame).unwrap_or_default(),
-        ..RunData::default()
-    };
-    let mut t0: Option<u64> = None;
-    let mut last = 0u64;
-    let mut bad: BTreeMap<String, (usize, String)> = BTreeMap::new();
-    let mut stream_state: BTreeMap<String, Option<(String, u8)>> = BTreeMap::new();
-    let mut other_streams: BTreeMap<String, usize> = BTreeMap::new();
-    let mut current: Option<Condition> = None;
-    let damage = bag.read(&wanted, &mut |m| {
-        let t0 = *t0.get_or_insert(m.log_time);
-        last = last.max(m.log_time);
+    /// The topics to read, each once, in the order pose, steering, objects, takeover,
+    /// collision, events.
+    fn topics(&self) -> Vec<String> {
+        let mut wanted: Vec<String> = Vec::new();
+        for r in [
+            self.pose.as_ref().map(|p| &p.r),
+            self.steering.as_ref().map(|s| &s.r),
+            self.objects.as_ref().map(|o| &o.r),
+            self.takeover.as_ref().map(|s| &s.r),
+            self.collision.as_ref().map(|s| &s.r),
+            self.events.as_ref(),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            if !wanted.contains(&r.topic) {
+                wanted.push(r.topic.clone());
+            }
+        }
+        wanted
+    }
+}
+
+/// The time series of a run as its messages arrive, and what could not be read.
+struct Collector<'a> {
+    cfg: &'a AnalyzeConfig,
+    readers: &'a Readers,
+    d: RunData,
+    t0: Option<u64>,
+    last: u64,
+    /// Per topic: messages that could not be read, and the first reason.
+    bad: BTreeMap<String, (usize, String)>,
+    /// Per event stream: its perturbation (id, severity), None when off.
+    stream_state: BTreeMap<String, Option<(String, u8)>>,
+    /// Events of streams the configuration does not follow, per stream.
+    other_streams: BTreeMap<String, usize>,
+    current: Option<Condition>,
+}
+
+impl Collector<'_> {
+    /// Takes one message of any of the readers' topics.
+    fn message(&mut self, m: RunMessage<'_>) {
+        let t0 = *self.t0.get_or_insert(m.log_time);
+        self.last = self.last.max(m.log_time);
         let t = m.log_time.saturating_sub(t0) as f64 / 1e9;
-        let mut fail = |topic: &str, e: DynError| {
-            let b = bad.entry(topic.to_string()).or_insert((0, e.to_string()));
-            b.0 += 1;
-        };
-        if let Some(pose) = &pose
+        let r = self.readers;
+        if let Some(pose) = &r.pose
             && m.topic == pose.r.topic
         {
-            let xy = pose
-                .r
-                .codec
-                .get_f64(m.data, &pose.x)
-                .and_then(|x| Ok([x, pose.r.codec.get_f64(m.data, &pose.y)?]));
-            match xy {
-                Ok(p) => {
-                    let yaw = pose.orientation.as_ref().and_then(|o| {
-                        let q = pose.r.codec.get(m.data, o).ok()?;
-                        let c = |n| q.field(n).and_then(Value::as_f64);
-                        Some(yaw_of([c("x")?, c("y")?, c("z")?, c("w")?]))
-                    });
-                    d.poses.push(PoseSample { t, p, yaw });
-                }
-                Err(e) => fail(m.topic, e),
-            }
+            self.pose(pose, m, t);
         }
-        if let Some(s) = &steering
+        if let Some(s) = &r.steering
             && m.topic == s.r.topic
             && let Some(f) = &s.field
         {
             match s.r.codec.get_f64(m.data, f) {
-                Ok(v) => d.steering.push((t, v)),
-                Err(e) => fail(m.topic, e),
+                Ok(v) => self.d.steering.push((t, v)),
+                Err(e) => self.fail(m.topic, e.to_string()),
             }
         }
-        if let Some(o) = &objects
+        if let Some(o) = &r.objects
             && m.topic == o.r.topic
         {
-            match o.r.codec.get(m.data, &o.array) {
-                Ok(Value::Array(items)) => {
-                    let pts = items
-                        .iter()
-                        .filter_map(|it| {
-                            let p = it.at(&o.position)?;
-                            Some([p.field("x")?.as_f64()?, p.field("y")?.as_f64()?])
-                        })
-                        .collect();
-                    d.objects.push((t, pts));
-                }
-                Ok(other) => fail(
-                    m.topic,
-                    DynError::NotANumber {
-                        path: o.array.to_string(),
-                        kind: other.kind(),
-                    },
-                ),
-                Err(e) => fail(m.topic, e),
-            }
+            self.objects(o, m, t);
         }
-        for (sig, slot) in [(&takeover, &mut d.takeover), (&collision, &mut d.collision)] {
+        self.flags(m, t);
+        if let (Some(e), Some(path)) = (&r.events, &r.events_data)
+            && m.topic == e.topic
+        {
+            self.event(e, path, m, t);
+        }
+    }
+
+    /// Counts a message of `topic` that could not be read.
+    fn fail(&mut self, topic: &str, reason: String) {
+        let b = self.bad.entry(topic.to_string()).or_insert((0, reason));
+        b.0 += 1;
+    }
+
+    fn pose(&mut self, pose: &PoseReader, m: RunMessage<'_>, t: f64) {
+        let xy = pose
+            .r
+            .codec
+            .get_f64(m.data, &pose.x)
+            .and_then(|x| Ok([x, pose.r.codec.get_f64(m.data, &pose.y)?]));
+        match xy {
+            Ok(p) => {
+                let yaw = pose.orientation.as_ref().and_then(|o| {
+                    let q = pose.r.codec.get(m.data, o).ok()?;
+                    let c = |n| q.field(n).and_then(Value::as_f64);
+                    Some(yaw_of([c("x")?, c("y")?, c("z")?, c("w")?]))
+                });
+                self.d.poses.push(PoseSample { t, p, yaw });
+            }
+            Err(e) => self.fail(m.topic, e.to_string()),
+        }
+    }
+
+    fn objects(&mut self, o: &ObjectsReader, m: RunMessage<'_>, t: f64) {
+        match o.r.codec.get(m.data, &o.array) {
+            Ok(Value::Array(items)) => {
+                let pts = items
+                    .iter()
+                    .filter_map(|it| {
+                        let p = it.at(&o.position)?;
+                        Some([p.field("x")?.as_f64()?, p.field("y")?.as_f64()?])
+                    })
+                    .collect();
+                self.d.objects.push((t, pts));
+            }
+            Ok(other) => {
+                let e = DynError::NotANumber {
+                    path: o.array.to_string(),
+                    kind: other.kind(),
+                };
+                self.fail(m.topic, e.to_string())
+            }
+            Err(e) => self.fail(m.topic, e.to_string()),
+        }
+    }
+
+    /// The takeover and collision signals: the first message that fires each.
+    fn flags(&mut self, m: RunMessage<'_>, t: f64) {
+        let r = self.readers;
+        for (sig, collision) in [(&r.takeover, false), (&r.collision, true)] {
             let Some(s) = sig else { continue };
+            let slot = if collision {
+                &self.d.collision
+            } else {
+                &self.d.takeover
+            };
             if m.topic != s.r.topic || slot.is_some() {
                 continue;
             }
@@ -461,92 +558,95 @@ pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
                 }),
             };
             match fired {
-                Ok(true) => *slot = Some(t),
+                Ok(true) if collision => self.d.collision = Some(t),
+                Ok(true) => self.d.takeover = Some(t),
                 Ok(false) => {}
-                Err(e) => fail(m.topic, e),
+                Err(e) => self.fail(m.topic, e.to_string()),
             }
         }
-        if let (Some(e), Some(path)) = (&events, &events_data)
-            && m.topic == e.topic
+    }
+
+    /// A perturbation event: the condition (every followed stream's perturbation) from `t` on.
+    fn event(&mut self, e: &Reader, path: &FieldPath, m: RunMessage<'_>, t: f64) {
+        let text = e.codec.get(m.data, path);
+        let ev = match &text {
+            Ok(Value::String(s)) => serde_json::from_str::<PerturbationEvent>(s)
+                .map_err(|err| format!("not a perturbation event ({err})")),
+            Ok(v) => Err(format!("expected a string, found a {}", v.kind())),
+            Err(err) => Err(err.to_string()),
+        };
+        let ev = match ev {
+            Ok(ev) => ev,
+            Err(reason) => return self.fail(m.topic, reason),
+        };
+        let streams = &self.cfg.event_streams;
+        if !(streams.is_empty() || streams.contains(&ev.topic)) {
+            *self.other_streams.entry(ev.topic.clone()).or_default() += 1;
+            return;
+        }
+        let state = match (ev.id, ev.severity) {
+            (Some(id), Some(s)) => Some((id, s)),
+            _ => None,
+        };
+        self.stream_state.insert(ev.topic, state);
+        let mut c: Vec<(String, u8)> = self.stream_state.values().flatten().cloned().collect();
+        c.sort();
+        c.dedup();
+        let c = Condition(c);
+        if self.current.as_ref() != Some(&c) {
+            self.d.events.push((t, c.clone()));
+            self.current = Some(c);
+        }
+    }
+
+    /// The run's data with its notes; an error when nothing (or no pose) could be read.
+    fn finish(self, run: &str, wanted: &[String], mut notes: Vec<String>) -> Result<RunData> {
+        let cfg = self.cfg;
+        if !cfg.event_streams.is_empty()
+            && self.stream_state.is_empty()
+            && !self.other_streams.is_empty()
         {
-            let text = e.codec.get(m.data, path);
-            let ev = match &text {
-                Ok(Value::String(s)) => serde_json::from_str::<PerturbationEvent>(s)
-                    .map_err(|err| format!("not a perturbation event ({err})")),
-                Ok(v) => Err(format!("expected a string, found a {}", v.kind())),
-                Err(err) => Err(err.to_string()),
-            };
-            match ev {
-                Ok(ev) => {
-                    if !(cfg.event_streams.is_empty() || cfg.event_streams.contains(&ev.topic)) {
-                        *other_streams.entry(ev.topic.clone()).or_default() += 1;
-                    } else {
-                        let state = match (ev.id, ev.severity) {
-                            (Some(id), Some(s)) => Some((id, s)),
-                            _ => None,
-                        };
-                        stream_state.insert(ev.topic, state);
-                        let mut c: Vec<(String, u8)> =
-                            stream_state.values().flatten().cloned().collect();
-                        c.sort();
-                        c.dedup();
-                        let c = Condition(c);
-                        if current.as_ref() != Some(&c) {
-                            d.events.push((t, c.clone()));
-                            current = Some(c);
-                        }
-                    }
-                }
-                Err(reason) => {
-                    let b = bad.entry(m.topic.to_string()).or_insert((0, reason));
-                    b.0 += 1;
-                }
-            }
+            notes.push(format!(
+                "no event of the streams {} (the events name {}): the whole run counts as nominal",
+                cfg.event_streams.join(", "),
+                self.other_streams
+                    .keys()
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
         }
-        Ok(())
-    });
-    let damage = damage.map_err(|e| StudyError::Run {
-        run: run.to_string(),
-        reason: e.to_string(),
-    })?;
-    if let Some(dmg) = damage {
-        notes.push(format!("the bag is damaged; read up to the damage: {dmg}"));
+        for (topic, (n, first)) in self.bad {
+            notes.push(format!(
+                "{n} message(s) on `{topic}` could not be read and were skipped (first: {first})"
+            ));
+        }
+        let mut d = self.d;
+        if let Some(p) = &cfg.pose
+            && d.poses.is_empty()
+        {
+            return Err(StudyError::Run {
+                run: run.to_string(),
+                reason: format!("no readable message on the pose topic `{}`", p.topic),
+            });
+        }
+        let Some(t0) = self.t0 else {
+            return Err(StudyError::Run {
+                run: run.to_string(),
+                reason: format!(
+                    "no message on any of the topics read ({})",
+                    wanted.join(", ")
+                ),
+            });
+        };
+        d.t0_ns = t0;
+        d.end = self.last.saturating_sub(d.t0_ns) as f64 / 1e9;
+        d.notes = notes;
+        // The bag's order is log time; sort defensively (a bag without index is read in file
+        // order).
+        d.poses.sort_by(|a, b| a.t.total_cmp(&b.t));
+        d.steering.sort_by(|a, b| a.0.total_cmp(&b.0));
+        d.objects.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Ok(d)
     }
-    if !cfg.event_streams.is_empty() && stream_state.is_empty() && !other_streams.is_empty() {
-        notes.push(format!(
-            "no event of the streams {} (the events name {}): the whole run counts as nominal",
-            cfg.event_streams.join(", "),
-            other_streams.keys().cloned().collect::<Vec<_>>().join(", ")
-        ));
-    }
-    for (topic, (n, first)) in bad {
-        notes.push(format!(
-            "{n} message(s) on `{topic}` could not be read and were skipped (first: {first})"
-        ));
-    }
-    if let Some(p) = &cfg.pose
-        && d.poses.is_empty()
-    {
-        return Err(StudyError::Run {
-            run: run.to_string(),
-            reason: format!("no readable message on the pose topic `{}`", p.topic),
-        });
-    }
-    if t0.is_none() {
-        return Err(StudyError::Run {
-            run: run.to_string(),
-            reason: format!(
-                "no message on any of the topics read ({})",
-                wanted.join(", ")
-            ),
-        });
-    }
-    d.t0_ns = t0.unwrap_or(0);
-    d.end = last.saturating_sub(d.t0_ns) as f64 / 1e9;
-    d.notes = notes;
-    // The bag's order is log time; sort defensively (a bag without index is read in file order).
-    d.poses.sort_by(|a, b| a.t.total_cmp(&b.t));
-    d.steering.sort_by(|a, b| a.0.total_cmp(&b.0));
-    d.objects.sort_by(|a, b| a.0.total_cmp(&b.0));
-    Ok(d)
 }
