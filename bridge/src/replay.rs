@@ -129,10 +129,8 @@ impl Replay {
         };
         filter.start = Some(bag_start + (self.cfg.start_offset * 1e9) as u64);
         let mut seqs: BTreeMap<&str, u64> = BTreeMap::new();
-        let mut pass = 0u32;
+        let mut passes = PassLog::default();
         let mut next_pass_at: Option<Instant> = None;
-        let mut last_pass_log = Instant::now();
-        let mut passes_logged = 0u32;
         loop {
             if let Some(at) = next_pass_at {
                 let now = Instant::now();
@@ -151,85 +149,22 @@ impl Replay {
                 };
                 rep.received += 1;
                 span = (span.0.min(m.log_time), span.1.max(m.log_time), span.2 + 1);
-                // Pace by the original timing.
-                if self.cfg.rate > 0.0 {
-                    let (wall0, log0) = *t0.get_or_insert((Instant::now(), m.log_time));
-                    let due = wall0
-                        + Duration::from_secs_f64(
-                            m.log_time.saturating_sub(log0) as f64 / 1e9 / self.cfg.rate,
-                        );
-                    match clock.as_deref_mut() {
-                        None => {
-                            let now = Instant::now();
-                            if due > now && !ctl.sleep(due - now) {
-                                return Ok(ControlFlow::Break(()));
-                            }
-                        }
-                        Some(tick) => loop {
-                            let now = Instant::now();
-                            // The bag's time now, between the last message and this one.
-                            let behind =
-                                due.saturating_duration_since(now).as_secs_f64() * self.cfg.rate;
-                            tick(m.log_time.saturating_sub((behind * 1e9) as u64));
-                            if due <= now {
-                                break;
-                            }
-                            if !ctl.sleep((due - now).min(Duration::from_millis(10))) {
-                                return Ok(ControlFlow::Break(()));
-                            }
-                        },
-                    }
-                } else if let Some(tick) = clock.as_deref_mut() {
-                    tick(m.log_time);
+                if !self.pace(ctl, &mut t0, m.log_time, clock.as_deref_mut()) {
+                    return Ok(ControlFlow::Break(()));
                 }
-                let decoded = match m.decode() {
-                    Some(Ok(d)) => d,
-                    Some(Err(e)) => {
+                let mut owned = None;
+                let payload = match payload_of(&m, &mut owned) {
+                    Ok(Some(p)) => p,
+                    Ok(None) => {
+                        rep.skipped += 1;
+                        return Ok(ControlFlow::Continue(()));
+                    }
+                    Err(e) => {
                         rep.bad += 1;
                         log_bad(name, rep.bad, &e);
                         return Ok(ControlFlow::Continue(()));
                     }
-                    None => {
-                        rep.skipped += 1;
-                        return Ok(ControlFlow::Continue(()));
-                    }
                 };
-                let owned;
-                let payload = match decoded {
-                    SensorMessage::Image(i) => Payload::Image(i),
-                    SensorMessage::Cloud(c) => Payload::Cloud(c),
-                    SensorMessage::Compressed(c) => {
-                        match perturb_core::formats::picture::decode(c.data) {
-                            Ok(image) => {
-                                owned = OwnedPayload::Image {
-                                    sec: c.header.stamp_sec,
-                                    nanosec: c.header.stamp_nanosec,
-                                    frame_id: c.header.frame_id.to_string(),
-                                    image,
-                                };
-                                owned.payload()
-                            }
-                            Err(e) => {
-                                rep.bad += 1;
-                                log_bad(
-                                    name,
-                                    rep.bad,
-                                    &format!("{} at {}: {e}", m.topic, m.log_time),
-                                );
-                                return Ok(ControlFlow::Continue(()));
-                            }
-                        }
-                    }
-                };
-                if let Err(e) = payload.validate() {
-                    rep.bad += 1;
-                    log_bad(
-                        name,
-                        rep.bad,
-                        &format!("{} at {}: {e}", m.topic, m.log_time),
-                    );
-                    return Ok(ControlFlow::Continue(()));
-                }
                 let seq = seqs.entry(stream.as_str()).or_insert(0);
                 let meta = FrameMeta {
                     seq: *seq,
@@ -263,36 +198,134 @@ impl Replay {
                     rep.notes.push(n);
                 }
             }
-            pass += 1;
             if !self.cfg.looped || ctl.stopped() || rep.forwarded == 0 {
                 break;
             }
-            // The next pass starts one mean message interval after the last message (at least
-            // 50 ms, so a bag of one instant does not flood the sinks), at the replay rate.
-            if self.cfg.rate > 0.0 {
-                let gap_ns = if span.2 > 1 && span.1 > span.0 {
-                    ((span.1 - span.0) / (span.2 - 1)).max(50_000_000)
-                } else {
-                    100_000_000
-                };
-                next_pass_at = Some(
-                    Instant::now() + Duration::from_secs_f64(gap_ns as f64 / 1e9 / self.cfg.rate),
-                );
-            }
-            // A short bag loops many times a second: say so for the first pass, then at most
-            // once a minute (the rest at debug level), so the log keeps what matters.
-            if pass == 1 || last_pass_log.elapsed() >= PASS_LOG_EVERY {
-                tracing::info!(
-                    "{name}: pass {pass} done, looping ({} passes since the last such line)",
-                    pass - passes_logged
-                );
-                last_pass_log = Instant::now();
-                passes_logged = pass;
-            } else {
-                tracing::debug!("{name}: pass {pass} done, looping");
-            }
+            passes.done(name);
+            next_pass_at = self.next_pass_at(span);
         }
         Ok(rep)
+    }
+
+    /// Waits until the message logged at `log_time` is due at the replay rate (`t0`: the wall
+    /// and log time of the pass's first message), ticking `clock` with the bag's time meanwhile;
+    /// without pacing (rate 0) only ticks. False when the replay was stopped while waiting.
+    fn pace<'c>(
+        &self,
+        ctl: &Control,
+        t0: &mut Option<(Instant, u64)>,
+        log_time: u64,
+        clock: Option<&mut (dyn FnMut(u64) + 'c)>,
+    ) -> bool {
+        if self.cfg.rate <= 0.0 {
+            if let Some(tick) = clock {
+                tick(log_time);
+            }
+            return true;
+        }
+        let (wall0, log0) = *t0.get_or_insert((Instant::now(), log_time));
+        let due = wall0
+            + Duration::from_secs_f64(log_time.saturating_sub(log0) as f64 / 1e9 / self.cfg.rate);
+        match clock {
+            None => {
+                let now = Instant::now();
+                due <= now || ctl.sleep(due - now)
+            }
+            Some(tick) => loop {
+                let now = Instant::now();
+                // The bag's time now, between the last message and this one.
+                let behind = due.saturating_duration_since(now).as_secs_f64() * self.cfg.rate;
+                tick(log_time.saturating_sub((behind * 1e9) as u64));
+                if due <= now {
+                    return true;
+                }
+                if !ctl.sleep((due - now).min(Duration::from_millis(10))) {
+                    return false;
+                }
+            },
+        }
+    }
+
+    /// When a looping replay starts its next pass: one mean message interval of the last pass
+    /// (`span`: first and last log time, messages) after now (at least 50 ms, so a bag of one
+    /// instant does not flood the sinks), at the replay rate; None (at once) without pacing.
+    fn next_pass_at(&self, span: (u64, u64, u64)) -> Option<Instant> {
+        if self.cfg.rate <= 0.0 {
+            return None;
+        }
+        let gap_ns = if span.2 > 1 && span.1 > span.0 {
+            ((span.1 - span.0) / (span.2 - 1)).max(50_000_000)
+        } else {
+            100_000_000
+        };
+        Some(Instant::now() + Duration::from_secs_f64(gap_ns as f64 / 1e9 / self.cfg.rate))
+    }
+}
+
+/// The payload of a bag message: borrowed for raw images and clouds, decoded into `owned` for a
+/// compressed image; None for a message that is not a sensor message; an error naming the
+/// message for one that does not decode or validate.
+fn payload_of<'a>(
+    m: &perturb_bag::BagMessage<'a>,
+    owned: &'a mut Option<OwnedPayload>,
+) -> std::result::Result<Option<Payload<'a>>, String> {
+    let payload = match m.decode() {
+        None => return Ok(None),
+        Some(Err(e)) => return Err(e.to_string()),
+        Some(Ok(SensorMessage::Image(i))) => Payload::Image(i),
+        Some(Ok(SensorMessage::Cloud(c))) => Payload::Cloud(c),
+        Some(Ok(SensorMessage::Compressed(c))) => {
+            let image = perturb_core::formats::picture::decode(c.data)
+                .map_err(|e| format!("{} at {}: {e}", m.topic, m.log_time))?;
+            owned
+                .insert(OwnedPayload::Image {
+                    sec: c.header.stamp_sec,
+                    nanosec: c.header.stamp_nanosec,
+                    frame_id: c.header.frame_id.to_string(),
+                    image,
+                })
+                .payload()
+        }
+    };
+    payload
+        .validate()
+        .map_err(|e| format!("{} at {}: {e}", m.topic, m.log_time))?;
+    Ok(Some(payload))
+}
+
+/// The log lines of a looping replay's passes: a short bag loops many times a second, so the
+/// first pass is said, then at most one line a minute (the rest at debug level).
+struct PassLog {
+    pass: u32,
+    logged: u32,
+    last: Instant,
+}
+
+impl Default for PassLog {
+    fn default() -> Self {
+        PassLog {
+            pass: 0,
+            logged: 0,
+            last: Instant::now(),
+        }
+    }
+}
+
+impl PassLog {
+    /// A pass of replay `name` finished and the replay loops on.
+    fn done(&mut self, name: &str) {
+        self.pass += 1;
+        let pass = self.pass;
+        if pass == 1 || self.last.elapsed() >= PASS_LOG_EVERY {
+            tracing::info!(
+                "{name}: pass {pass} done, looping ({} passes since the last such line)",
+                pass - self.logged
+            );
+            self.last = Instant::now();
+            self.logged = pass;
+        } else {
+            tracing::debug!("{name}: pass {pass} done, looping");
+        }
     }
 }
 
