@@ -13,14 +13,13 @@
 use crate::adapter::{Adapter, Control, POLL};
 use crate::bus::{Bus, Side};
 use crate::config::RecordSection;
-use crate::frame::{StreamKind, monotonic_ns, wall_ns};
+use crate::frame::{FrameMeta, Payload, StreamKind, monotonic_ns, wall_ns};
 use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
 use anyhow::{Context, Result};
-use crossbeam::channel::{Sender, bounded};
+use crossbeam::channel::{Receiver, Sender, bounded};
 use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string_for};
 use perturb_bag::{AnyWriter, BagFormat};
 use std::collections::BTreeMap;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The bag topic a stream side is recorded on.
@@ -74,22 +73,7 @@ impl Adapter for Record {
             None => BagFormat::Rosbag2,
         };
         let mut writer = AnyWriter::create(&self.cfg.out, format, self.cfg.compression.as_deref())?;
-        let mut sides = Vec::new();
-        for stream in &self.cfg.streams {
-            let kind = *self.kinds.get(stream).with_context(|| {
-                format!("record.streams: no source says what stream `{stream}` carries")
-            })?;
-            for (on, side) in [
-                (self.cfg.raw, Side::Raw),
-                (self.cfg.perturbed, Side::Perturbed),
-            ] {
-                if on {
-                    let topic = record_topic(stream, side);
-                    let ch = writer.add_topic(&topic, kind.ros_type())?;
-                    sides.push((stream.clone(), kind, side, topic, ch));
-                }
-            }
-        }
+        let sides = self.add_topics(&mut writer)?;
         let events = if self.cfg.perturbed {
             Some(writer.add_topic(EVENTS_TOPIC, EVENTS_TYPE)?)
         } else {
@@ -102,105 +86,30 @@ impl Adapter for Record {
             Side::Raw
         };
         let (tx, rx) = bounded::<Msg>(64);
-        let done_streams = Arc::new(AtomicU64::new(0));
-        let n_counted = sides.iter().filter(|s| s.2 == counted).count() as u64;
         let mut rep = AdapterReport {
             name: name.clone(),
             ..Default::default()
         };
         let (ready_tx, ready_rx) = bounded::<Result<()>>(sides.len());
+        let shared = Shared {
+            name: name.clone(),
+            format,
+            bus,
+            ctl: ctl.clone(),
+            done_streams: AtomicU64::new(0),
+            n_counted: sides.iter().filter(|s| s.side == counted).count() as u64,
+            deadline: self
+                .cfg
+                .seconds
+                .map(|t| std::time::Instant::now() + std::time::Duration::from_secs_f64(t)),
+            seconds: self.cfg.seconds,
+        };
         let results = std::thread::scope(|scope| -> Result<Vec<SideResult>> {
             let mut handles = Vec::new();
-            for (stream, kind, side, topic, ch) in sides.iter().cloned() {
-                let tx: Sender<Msg> = tx.clone();
-                let ctl = ctl.clone();
-                let ready_tx = ready_tx.clone();
-                let done_streams = done_streams.clone();
-                let max = self.cfg.max_frames.filter(|_| side == counted);
-                let seconds = self.cfg.seconds;
-                let deadline = seconds
-                    .map(|t| std::time::Instant::now() + std::time::Duration::from_secs_f64(t));
-                let name = name.clone();
-                handles.push(scope.spawn(move || -> SideResult {
-                    let key = format!("{stream}/{}", side.as_str());
-                    let mut sub = match bus.subscriber(&stream, kind, side) {
-                        Ok(s) => {
-                            let _ = ready_tx.send(Ok(()));
-                            s
-                        }
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(e));
-                            return (key, 0, 0, Latency::default(), HopLatency::default());
-                        }
-                    };
-                    let (mut got, mut bad, mut lat) = (0u64, 0u64, Latency::default());
-                    let mut hops = HopLatency::default();
-                    while !ctl.stopped()
-                        && max.is_none_or(|m| got < m)
-                        && deadline.is_none_or(|d| std::time::Instant::now() < d)
-                    {
-                        let r = sub.recv(POLL, &mut |meta, payload| {
-                            if max.is_some_and(|m| got >= m) {
-                                return;
-                            }
-                            if payload.kind() != kind {
-                                bad += 1;
-                                log_bad(&name, bad, &format!("{stream}: frame of the wrong kind"));
-                                return;
-                            }
-                            got += 1;
-                            if meta.hops.source != 0 {
-                                lat.add(monotonic_ns().saturating_sub(meta.hops.source));
-                            }
-                            hops.add(&meta.hops);
-                            let h = payload.header();
-                            let event = (side == Side::Perturbed).then(|| {
-                                let ev = PerturbationEvent {
-                                    topic: topic.clone(),
-                                    stream: Some(stream.clone()),
-                                    seq: meta.seq,
-                                    stamp_sec: h.stamp_sec,
-                                    stamp_nanosec: h.stamp_nanosec,
-                                    frame_id: h.frame_id.to_string(),
-                                    id: meta.applied.as_ref().map(|a| a.id.clone()),
-                                    severity: meta.applied.as_ref().map(|a| a.severity),
-                                    seed: meta.applied.as_ref().map(|a| a.seed),
-                                };
-                                encode_string_for(
-                                    format,
-                                    &serde_json::to_string(&ev).unwrap_or_else(|_| "{}".into()),
-                                )
-                            });
-                            let _ = tx.send(Msg {
-                                channel: ch,
-                                log_time: wall_ns(),
-                                publish_time: meta.log_time,
-                                bytes: payload.encode_for(format, meta.seq),
-                                event,
-                            });
-                        });
-                        if let Err(e) = r {
-                            bad += 1;
-                            log_bad(&name, bad, &e);
-                        }
-                        ctl.watch_publishers(sub.as_ref());
-                    }
-                    if max.is_some_and(|m| got >= m)
-                        && done_streams.fetch_add(1, Ordering::SeqCst) + 1 == n_counted
-                    {
-                        ctl.stop_because(format!(
-                            "{name}: every stream reached max_frames ({})",
-                            max.unwrap_or(0)
-                        ));
-                    }
-                    if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
-                        ctl.stop_because(format!(
-                            "{name}: recorded for the {} s asked for",
-                            seconds.unwrap_or(0.0)
-                        ));
-                    }
-                    (key, got, bad, lat, hops)
-                }));
+            for spec in sides.iter().cloned() {
+                let max = self.cfg.max_frames.filter(|_| spec.side == counted);
+                let (tx, ready_tx, shared) = (tx.clone(), ready_tx.clone(), &shared);
+                handles.push(scope.spawn(move || shared.record_side(spec, max, tx, ready_tx)));
             }
             drop(tx);
             drop(ready_tx);
@@ -211,22 +120,7 @@ impl Adapter for Record {
             }
             ctl.ready();
             // Write until every stream thread has finished and the queue is empty.
-            let mut written = 0u64;
-            for m in rx.iter() {
-                if let Err(e) = writer.write(m.channel, m.log_time, m.publish_time, &m.bytes) {
-                    rep.failed += 1;
-                    log_bad(&name, rep.failed, &e);
-                    continue;
-                }
-                written += 1;
-                if let (Some(ev), Some(ch)) = (m.event, events)
-                    && let Err(e) = writer.write(ch, m.log_time, m.publish_time, &ev)
-                {
-                    rep.failed += 1;
-                    log_bad(&name, rep.failed, &e);
-                }
-            }
-            rep.forwarded = written;
+            rep.forwarded = write_all(&mut writer, &rx, events, &name, &mut rep.failed);
             Ok(handles
                 .into_iter()
                 .map(|h| {
@@ -250,4 +144,187 @@ impl Adapter for Record {
         rep.notes.push(format!("bag written to {}", dir.display()));
         Ok(rep)
     }
+}
+
+/// One recorded stream side: its stream, kind, side, bag topic and channel.
+#[derive(Clone)]
+struct SideSpec {
+    stream: String,
+    kind: StreamKind,
+    side: Side,
+    topic: String,
+    channel: u16,
+}
+
+impl Record {
+    /// Adds a bag topic per recorded stream side (raw and/or perturbed, as configured).
+    fn add_topics(&self, writer: &mut AnyWriter) -> Result<Vec<SideSpec>> {
+        let mut sides = Vec::new();
+        for stream in &self.cfg.streams {
+            let kind = *self.kinds.get(stream).with_context(|| {
+                format!("record.streams: no source says what stream `{stream}` carries")
+            })?;
+            for (on, side) in [
+                (self.cfg.raw, Side::Raw),
+                (self.cfg.perturbed, Side::Perturbed),
+            ] {
+                if on {
+                    let topic = record_topic(stream, side);
+                    let channel = writer.add_topic(&topic, kind.ros_type())?;
+                    sides.push(SideSpec {
+                        stream: stream.clone(),
+                        kind,
+                        side,
+                        topic,
+                        channel,
+                    });
+                }
+            }
+        }
+        Ok(sides)
+    }
+}
+
+/// What the recording threads share.
+struct Shared<'b> {
+    name: String,
+    format: BagFormat,
+    bus: &'b dyn Bus,
+    ctl: Control,
+    /// Counted sides that reached `max_frames`.
+    done_streams: AtomicU64,
+    /// Sides `max_frames` counts.
+    n_counted: u64,
+    deadline: Option<std::time::Instant>,
+    seconds: Option<f64>,
+}
+
+impl Shared<'_> {
+    /// Records one stream side until stopped, `max` frames or the deadline: every frame goes to
+    /// `tx` in the bag's encoding (with its perturbation event on the perturbed side). Says on
+    /// `ready_tx` once subscribed.
+    fn record_side(
+        &self,
+        spec: SideSpec,
+        max: Option<u64>,
+        tx: Sender<Msg>,
+        ready_tx: Sender<Result<()>>,
+    ) -> SideResult {
+        let name = &self.name;
+        let SideSpec {
+            stream, kind, side, ..
+        } = &spec;
+        let key = format!("{stream}/{}", side.as_str());
+        let mut sub = match self.bus.subscriber(stream, *kind, *side) {
+            Ok(s) => {
+                let _ = ready_tx.send(Ok(()));
+                s
+            }
+            Err(e) => {
+                let _ = ready_tx.send(Err(e));
+                return (key, 0, 0, Latency::default(), HopLatency::default());
+            }
+        };
+        let (mut got, mut bad, mut lat) = (0u64, 0u64, Latency::default());
+        let mut hops = HopLatency::default();
+        let deadline = self.deadline;
+        while !self.ctl.stopped()
+            && max.is_none_or(|m| got < m)
+            && deadline.is_none_or(|d| std::time::Instant::now() < d)
+        {
+            let r = sub.recv(POLL, &mut |meta, payload| {
+                if max.is_some_and(|m| got >= m) {
+                    return;
+                }
+                if payload.kind() != *kind {
+                    bad += 1;
+                    log_bad(name, bad, &format!("{stream}: frame of the wrong kind"));
+                    return;
+                }
+                got += 1;
+                if meta.hops.source != 0 {
+                    lat.add(monotonic_ns().saturating_sub(meta.hops.source));
+                }
+                hops.add(&meta.hops);
+                let _ = tx.send(self.message(&spec, meta, payload));
+            });
+            if let Err(e) = r {
+                bad += 1;
+                log_bad(name, bad, &e);
+            }
+            self.ctl.watch_publishers(sub.as_ref());
+        }
+        if max.is_some_and(|m| got >= m)
+            && self.done_streams.fetch_add(1, Ordering::SeqCst) + 1 == self.n_counted
+        {
+            self.ctl.stop_because(format!(
+                "{name}: every stream reached max_frames ({})",
+                max.unwrap_or(0)
+            ));
+        }
+        if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+            self.ctl.stop_because(format!(
+                "{name}: recorded for the {} s asked for",
+                self.seconds.unwrap_or(0.0)
+            ));
+        }
+        (key, got, bad, lat, hops)
+    }
+
+    /// A frame of `spec`'s side in the bag's encoding, with its perturbation event (JSON in a
+    /// `std_msgs/String`) on the perturbed side.
+    fn message(&self, spec: &SideSpec, meta: &FrameMeta, payload: &Payload<'_>) -> Msg {
+        let h = payload.header();
+        let event = (spec.side == Side::Perturbed).then(|| {
+            let ev = PerturbationEvent {
+                topic: spec.topic.clone(),
+                stream: Some(spec.stream.clone()),
+                seq: meta.seq,
+                stamp_sec: h.stamp_sec,
+                stamp_nanosec: h.stamp_nanosec,
+                frame_id: h.frame_id.to_string(),
+                id: meta.applied.as_ref().map(|a| a.id.clone()),
+                severity: meta.applied.as_ref().map(|a| a.severity),
+                seed: meta.applied.as_ref().map(|a| a.seed),
+            };
+            encode_string_for(
+                self.format,
+                &serde_json::to_string(&ev).unwrap_or_else(|_| "{}".into()),
+            )
+        });
+        Msg {
+            channel: spec.channel,
+            log_time: wall_ns(),
+            publish_time: meta.log_time,
+            bytes: payload.encode_for(self.format, meta.seq),
+            event,
+        }
+    }
+}
+
+/// Writes every queued message (and its event on `events`) until the senders are gone; a
+/// failed write is counted in `failed` and logged. Returns the frames written.
+fn write_all(
+    writer: &mut AnyWriter,
+    rx: &Receiver<Msg>,
+    events: Option<u16>,
+    name: &str,
+    failed: &mut u64,
+) -> u64 {
+    let mut written = 0u64;
+    for m in rx.iter() {
+        if let Err(e) = writer.write(m.channel, m.log_time, m.publish_time, &m.bytes) {
+            *failed += 1;
+            log_bad(name, *failed, &e);
+            continue;
+        }
+        written += 1;
+        if let (Some(ev), Some(ch)) = (m.event, events)
+            && let Err(e) = writer.write(ch, m.log_time, m.publish_time, &ev)
+        {
+            *failed += 1;
+            log_bad(name, *failed, &e);
+        }
+    }
+    written
 }
