@@ -44,9 +44,28 @@ mod tests {
     use super::*;
     use std::process::Command;
 
+    /// `sleep 30` with SIGINT at its default action, whatever this process inherited (a test
+    /// run started in the background of a shell has SIGINT ignored, and children inherit that).
+    // libc's signal between fork and exec.
+    #[allow(unsafe_code)]
+    fn sleeper() -> std::process::Child {
+        use std::os::unix::process::CommandExt;
+        let mut cmd = Command::new("sleep");
+        cmd.arg("30");
+        // SAFETY: signal(2) is async-signal-safe, the only kind of call allowed between fork and
+        // exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::signal(libc::SIGINT, libc::SIG_DFL);
+                Ok(())
+            });
+        }
+        cmd.spawn().unwrap()
+    }
+
     #[test]
     fn a_child_that_heeds_sigint_exits_and_one_that_ignores_it_is_killed() {
-        let mut sleeper = Command::new("sleep").arg("30").spawn().unwrap();
+        let mut sleeper = sleeper();
         let st = interrupt(&mut sleeper, Duration::from_secs(5)).expect("sleep dies on SIGINT");
         assert!(!st.success());
         let mut stubborn = Command::new("sh")
