@@ -306,155 +306,179 @@ fn print_report(
     live: Option<&Live>,
     fits: &[Option<Fit>],
 ) -> Result<()> {
-    let fit_of = |i: usize| fits.get(i).copied().flatten();
-    let fit_cell = |f: Option<Fit>| f.map_or("-".to_string(), |f| f.to_string());
     match format {
-        Format::Json => {
-            let out: Vec<Row<'_>> = rows
-                .iter()
-                .enumerate()
-                .map(|(i, t)| Row {
-                    timing: t,
-                    threads_to_fit: fit_of(i),
-                    budget_ms: budget,
-                    fits_budget: t.max_ms <= budget,
-                    node_overhead_ms: live.map(|l| l.overhead_ms),
-                    dropped: live.and_then(|l| l.dropped.get(i).copied()),
-                })
-                .collect();
-            println!("{}", serde_json::to_string_pretty(&out)?);
-        }
-        Format::Csv => {
-            println!(
-                "id,name,severity,frames,setup_ms,mean_ms,median_ms,p99_ms,max_ms,budget_ms,fits_budget{}{}",
-                if live.is_some() {
-                    ",node_overhead_ms,dropped"
-                } else {
-                    ""
-                },
-                if fits.is_empty() {
-                    ""
-                } else {
-                    ",threads_to_fit"
-                }
-            );
-            for (i, t) in rows.iter().enumerate() {
-                let extra = live
-                    .map(|l| {
-                        format!(
-                            ",{:.3},{}",
-                            l.overhead_ms,
-                            l.dropped.get(i).copied().unwrap_or(0)
-                        )
-                    })
-                    .unwrap_or_default();
-                let extra = if fits.is_empty() {
-                    extra
-                } else {
-                    format!("{extra},{}", fit_cell(fit_of(i)))
-                };
-                println!(
-                    "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{}{extra}",
-                    t.id,
-                    t.name,
-                    t.severity,
-                    t.frames,
-                    t.setup_ms,
-                    t.mean_ms,
-                    t.median_ms,
-                    t.p99_ms,
-                    t.max_ms,
-                    budget,
-                    t.max_ms <= budget
-                );
-            }
-        }
+        Format::Json => print_json(rows, budget, live, fits)?,
+        Format::Csv => print_csv(rows, budget, live, fits),
         Format::Table | Format::Markdown => {
-            let md = format == Format::Markdown;
-            if let Some(l) = live {
-                println!(
-                    "live pipeline (bag replay -> perturbd): latency = ingress publish -> daemon publish; \
-                     middleware (node) overhead with every perturbation off: {:.3} ms mean; frames dropped by the daemon: {}{}",
-                    l.overhead_ms,
-                    l.dropped.iter().sum::<u64>(),
-                    if md { "\n" } else { "" }
-                );
-            }
-            let mut ids: Vec<&'static str> = rows.iter().map(|t| t.id).collect();
-            ids.dedup();
-            let with_fit = !fits.is_empty();
-            if md {
-                println!(
-                    "| id | name | mean ms (avg over severities) | median ms (max over severities) | max ms | setup ms | fits {budget} ms |{}",
-                    if with_fit { " threads to fit |" } else { "" }
-                );
-                println!(
-                    "|---|---|---:|---:|---:|---:|:---:|{}",
-                    if with_fit { "---:|" } else { "" }
-                );
-            } else {
-                println!(
-                    "{:<7} {:<24} {:>9} {:>10} {:>9} {:>9}  fits {budget} ms{}",
-                    "id",
-                    "name",
-                    "mean_ms",
-                    "median_ms",
-                    "max_ms",
-                    "setup_ms",
-                    if with_fit { "  threads to fit" } else { "" }
-                );
-            }
-            let mut fits_all = 0;
-            for id in &ids {
-                let rs: Vec<&Timing> = rows.iter().filter(|t| t.id == *id).collect();
-                // The most threads any severity needs (an estimate wins over a measurement of
-                // the same count: it is the less certain figure).
-                let need = rows
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, t)| t.id == *id)
-                    .filter_map(|(i, _)| fit_of(i))
-                    .max_by_key(|f| (f.threads, f.estimated));
-                let need = if with_fit {
-                    let cell = need.map_or_else(|| "1".to_string(), |f| f.to_string());
-                    if md {
-                        format!(" {cell} |")
-                    } else {
-                        format!("  {cell:>6}")
-                    }
-                } else {
-                    String::new()
-                };
-                let mean = rs.iter().map(|t| t.mean_ms).sum::<f64>() / rs.len() as f64;
-                let med = rs.iter().map(|t| t.median_ms).fold(0.0, f64::max);
-                let max = rs.iter().map(|t| t.max_ms).fold(0.0, f64::max);
-                let setup = rs.iter().map(|t| t.setup_ms).fold(0.0, f64::max);
-                let fits = max <= budget;
-                fits_all += fits as usize;
-                let mark = if fits { "yes" } else { "NO" };
-                if md {
-                    println!(
-                        "| {} | {} | {mean:.2} | {med:.2} | {max:.2} | {setup:.1} | {mark} |{need}",
-                        id, rs[0].name
-                    );
-                } else {
-                    println!(
-                        "{:<7} {:<24} {mean:>9.2} {med:>10.2} {max:>9.2} {setup:>9.1}  {mark}{need}",
-                        id, rs[0].name
-                    );
-                }
-            }
-            let mut medians: Vec<f64> = rows.iter().map(|t| t.median_ms).collect();
-            medians.sort_by(f64::total_cmp);
-            let median = medians.get(medians.len() / 2).copied().unwrap_or(0.0);
-            println!(
-                "{}{fits_all}/{} perturbations fit {budget} ms at every severity; median over all rows {median:.2} ms",
-                if md { "\n" } else { "" },
-                ids.len()
-            );
+            print_table(rows, budget, format == Format::Markdown, live, fits)
         }
     }
     Ok(())
+}
+
+/// The threads row `i` needs to fit, if it was measured or estimated.
+fn fit_of(fits: &[Option<Fit>], i: usize) -> Option<Fit> {
+    fits.get(i).copied().flatten()
+}
+
+/// One JSON object per perturbation and severity.
+fn print_json(
+    rows: &[Timing],
+    budget: f64,
+    live: Option<&Live>,
+    fits: &[Option<Fit>],
+) -> Result<()> {
+    let fit_of = |i: usize| fit_of(fits, i);
+    let out: Vec<Row<'_>> = rows
+        .iter()
+        .enumerate()
+        .map(|(i, t)| Row {
+            timing: t,
+            threads_to_fit: fit_of(i),
+            budget_ms: budget,
+            fits_budget: t.max_ms <= budget,
+            node_overhead_ms: live.map(|l| l.overhead_ms),
+            dropped: live.and_then(|l| l.dropped.get(i).copied()),
+        })
+        .collect();
+    println!("{}", serde_json::to_string_pretty(&out)?);
+    Ok(())
+}
+
+/// One CSV line per perturbation and severity, after the header.
+fn print_csv(rows: &[Timing], budget: f64, live: Option<&Live>, fits: &[Option<Fit>]) {
+    let fit_of = |i: usize| fit_of(fits, i);
+    let fit_cell = |f: Option<Fit>| f.map_or("-".to_string(), |f| f.to_string());
+    println!(
+        "id,name,severity,frames,setup_ms,mean_ms,median_ms,p99_ms,max_ms,budget_ms,fits_budget{}{}",
+        if live.is_some() {
+            ",node_overhead_ms,dropped"
+        } else {
+            ""
+        },
+        if fits.is_empty() {
+            ""
+        } else {
+            ",threads_to_fit"
+        }
+    );
+    for (i, t) in rows.iter().enumerate() {
+        let extra = live
+            .map(|l| {
+                format!(
+                    ",{:.3},{}",
+                    l.overhead_ms,
+                    l.dropped.get(i).copied().unwrap_or(0)
+                )
+            })
+            .unwrap_or_default();
+        let extra = if fits.is_empty() {
+            extra
+        } else {
+            format!("{extra},{}", fit_cell(fit_of(i)))
+        };
+        println!(
+            "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{},{}{extra}",
+            t.id,
+            t.name,
+            t.severity,
+            t.frames,
+            t.setup_ms,
+            t.mean_ms,
+            t.median_ms,
+            t.p99_ms,
+            t.max_ms,
+            budget,
+            t.max_ms <= budget
+        );
+    }
+}
+
+/// One line per perturbation (the severities folded: mean of means, max of medians and maxima),
+/// as a text table or markdown, and the summary line.
+fn print_table(rows: &[Timing], budget: f64, md: bool, live: Option<&Live>, fits: &[Option<Fit>]) {
+    let fit_of = |i: usize| fit_of(fits, i);
+    if let Some(l) = live {
+        println!(
+            "live pipeline (bag replay -> perturbd): latency = ingress publish -> daemon publish; \
+             middleware (node) overhead with every perturbation off: {:.3} ms mean; frames dropped by the daemon: {}{}",
+            l.overhead_ms,
+            l.dropped.iter().sum::<u64>(),
+            if md { "\n" } else { "" }
+        );
+    }
+    let mut ids: Vec<&'static str> = rows.iter().map(|t| t.id).collect();
+    ids.dedup();
+    let with_fit = !fits.is_empty();
+    if md {
+        println!(
+            "| id | name | mean ms (avg over severities) | median ms (max over severities) | max ms | setup ms | fits {budget} ms |{}",
+            if with_fit { " threads to fit |" } else { "" }
+        );
+        println!(
+            "|---|---|---:|---:|---:|---:|:---:|{}",
+            if with_fit { "---:|" } else { "" }
+        );
+    } else {
+        println!(
+            "{:<7} {:<24} {:>9} {:>10} {:>9} {:>9}  fits {budget} ms{}",
+            "id",
+            "name",
+            "mean_ms",
+            "median_ms",
+            "max_ms",
+            "setup_ms",
+            if with_fit { "  threads to fit" } else { "" }
+        );
+    }
+    let mut fits_all = 0;
+    for id in &ids {
+        let rs: Vec<&Timing> = rows.iter().filter(|t| t.id == *id).collect();
+        // The most threads any severity needs (an estimate wins over a measurement of
+        // the same count: it is the less certain figure).
+        let need = rows
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.id == *id)
+            .filter_map(|(i, _)| fit_of(i))
+            .max_by_key(|f| (f.threads, f.estimated));
+        let need = if with_fit {
+            let cell = need.map_or_else(|| "1".to_string(), |f| f.to_string());
+            if md {
+                format!(" {cell} |")
+            } else {
+                format!("  {cell:>6}")
+            }
+        } else {
+            String::new()
+        };
+        let mean = rs.iter().map(|t| t.mean_ms).sum::<f64>() / rs.len() as f64;
+        let med = rs.iter().map(|t| t.median_ms).fold(0.0, f64::max);
+        let max = rs.iter().map(|t| t.max_ms).fold(0.0, f64::max);
+        let setup = rs.iter().map(|t| t.setup_ms).fold(0.0, f64::max);
+        let fits = max <= budget;
+        fits_all += fits as usize;
+        let mark = if fits { "yes" } else { "NO" };
+        if md {
+            println!(
+                "| {} | {} | {mean:.2} | {med:.2} | {max:.2} | {setup:.1} | {mark} |{need}",
+                id, rs[0].name
+            );
+        } else {
+            println!(
+                "{:<7} {:<24} {mean:>9.2} {med:>10.2} {max:>9.2} {setup:>9.1}  {mark}{need}",
+                id, rs[0].name
+            );
+        }
+    }
+    let mut medians: Vec<f64> = rows.iter().map(|t| t.median_ms).collect();
+    medians.sort_by(f64::total_cmp);
+    let median = medians.get(medians.len() / 2).copied().unwrap_or(0.0);
+    println!(
+        "{}{fits_all}/{} perturbations fit {budget} ms at every severity; median over all rows {median:.2} ms",
+        if md { "\n" } else { "" },
+        ids.len()
+    );
 }
 
 #[cfg(test)]
