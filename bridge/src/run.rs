@@ -258,48 +258,87 @@ pub struct Outcome {
 
 /// Runs a plan on `bus` until stopped; returns every adapter's report and why it stopped.
 pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let why: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
+    let mut r = Runner {
+        stop: Arc::new(AtomicBool::new(false)),
+        why: Arc::default(),
+        upstream: Arc::new(std::sync::atomic::AtomicU64::new(0)),
+        bus,
+        handles: Vec::new(),
+    };
     let has_sources = !plan.sources.is_empty();
-    let upstream = Arc::new(std::sync::atomic::AtomicU64::new(0));
-    let mut handles = Vec::new();
-    let spawn =
-        |a: Box<dyn Adapter>,
-         ready: crossbeam::channel::Sender<()>,
-         handles: &mut Vec<(String, bool, std::thread::JoinHandle<Result<AdapterReport>>)>|
-         -> Result<()> {
-            let name = a.name();
-            let sink = a.is_sink();
-            let ctl = Control::new(stop.clone(), Some(ready))
-                .with_reason(why.clone())
-                .with_upstream(upstream.clone());
-            let bus = bus.clone();
-            let h = std::thread::Builder::new()
-                .name(name.chars().take(15).collect())
-                .spawn(move || {
-                    let stopper = ctl.clone();
-                    let r = a.run(bus.as_ref(), ctl);
-                    if let Err(e) = &r {
-                        tracing::error!("{e:#}");
-                        stopper.stop_because(format!("an adapter failed: {e:#}"));
-                    }
-                    r
-                })?;
-            handles.push((name, sink, h));
-            Ok(())
-        };
-    // Waits until `n` adapters are ready; an adapter that fails first drops its sender and
-    // stops the others, which ends the wait.
-    let wait_ready = |rx: crossbeam::channel::Receiver<()>, n: usize| {
+    // The sinks first, so the sources' first frames find them ready.
+    r.start(plan.sinks, false)?;
+    r.start(plan.sources, true)?;
+    tracing::info!("bridge running on the {} bus", r.bus.name());
+    r.supervise(has_sources && !plan.endless, plan.publishers_gone, linger);
+    // Also when an adapter stopped the run (a recorder's max_frames, a failure).
+    stopping();
+    r.finish()
+}
+
+/// An adapter's thread: its name, whether it is a sink, and its report.
+type AdapterThread = (String, bool, std::thread::JoinHandle<Result<AdapterReport>>);
+
+/// The running adapters and what they share: the stop flag, the first reason to stop, and when a
+/// sink last saw a publisher.
+struct Runner {
+    stop: Arc<AtomicBool>,
+    why: Arc<std::sync::Mutex<Option<String>>>,
+    upstream: Arc<std::sync::atomic::AtomicU64>,
+    bus: Arc<dyn Bus>,
+    handles: Vec<AdapterThread>,
+}
+
+impl Runner {
+    /// Starts `adapters` (each on its thread) and waits until they are ready; sources are not
+    /// started once the run is stopping.
+    fn start(&mut self, adapters: Vec<Box<dyn Adapter>>, sources: bool) -> Result<()> {
+        let (tx, rx) = crossbeam::channel::unbounded();
+        let n = adapters.len();
+        for a in adapters {
+            if sources && self.stop.load(Ordering::SeqCst) {
+                break;
+            }
+            self.spawn(a, tx.clone())?;
+        }
+        drop(tx);
+        self.wait_ready(rx, n);
+        Ok(())
+    }
+
+    /// Runs `a` on a thread of its own; a failure stops the whole run, saying why.
+    fn spawn(&mut self, a: Box<dyn Adapter>, ready: crossbeam::channel::Sender<()>) -> Result<()> {
+        let name = a.name();
+        let sink = a.is_sink();
+        let ctl = Control::new(self.stop.clone(), Some(ready))
+            .with_reason(self.why.clone())
+            .with_upstream(self.upstream.clone());
+        let bus = self.bus.clone();
+        let h = std::thread::Builder::new()
+            .name(name.chars().take(15).collect())
+            .spawn(move || {
+                let stopper = ctl.clone();
+                let r = a.run(bus.as_ref(), ctl);
+                if let Err(e) = &r {
+                    tracing::error!("{e:#}");
+                    stopper.stop_because(format!("an adapter failed: {e:#}"));
+                }
+                r
+            })?;
+        self.handles.push((name, sink, h));
+        Ok(())
+    }
+
+    /// Waits until `n` adapters are ready; an adapter that fails first drops its sender and
+    /// stops the others, which ends the wait.
+    fn wait_ready(&self, rx: crossbeam::channel::Receiver<()>, n: usize) {
         let deadline = Instant::now() + Duration::from_secs(120);
         let mut got = 0;
-        while got < n && Instant::now() < deadline && !stop.load(Ordering::SeqCst) {
+        while got < n && Instant::now() < deadline && !self.stop.load(Ordering::SeqCst) {
             // A signal while the adapters start (e.g. a long pre-render) stops them too.
             if SIGNALLED.load(Ordering::SeqCst) {
-                if let Ok(mut g) = why.lock() {
-                    g.get_or_insert("SIGINT/SIGTERM".into());
-                }
-                stop.store(true, Ordering::SeqCst);
+                self.set_why("SIGINT/SIGTERM".into());
+                self.stop.store(true, Ordering::SeqCst);
                 break;
             }
             match rx.recv_timeout(Duration::from_millis(50)) {
@@ -308,102 +347,98 @@ pub fn run(plan: Plan, bus: Arc<dyn Bus>, linger: Duration) -> Result<Outcome> {
                 Err(crossbeam::channel::RecvTimeoutError::Disconnected) => break,
             }
         }
-    };
-    let (tx, rx) = crossbeam::channel::unbounded();
-    let n_sinks = plan.sinks.len();
-    for a in plan.sinks {
-        spawn(a, tx.clone(), &mut handles)?;
     }
-    drop(tx);
-    wait_ready(rx, n_sinks);
-    let (tx, rx) = crossbeam::channel::unbounded();
-    let n_sources = plan.sources.len();
-    for a in plan.sources {
-        if stop.load(Ordering::SeqCst) {
-            break;
-        }
-        spawn(a, tx.clone(), &mut handles)?;
-    }
-    drop(tx);
-    wait_ready(rx, n_sources);
-    tracing::info!("bridge running on the {} bus", bus.name());
-    let mut sources_done_at: Option<Instant> = None;
-    let set_why = |w: String| {
-        if let Ok(mut g) = why.lock() {
+
+    /// Keeps the first reason given to stop.
+    fn set_why(&self, w: String) {
+        if let Ok(mut g) = self.why.lock() {
             g.get_or_insert(w);
         }
-    };
-    loop {
-        if SIGNALLED.load(Ordering::SeqCst) {
-            set_why("SIGINT/SIGTERM".into());
-            stopping();
-            stop.store(true, Ordering::SeqCst);
-        }
-        if stop.load(Ordering::SeqCst) {
-            break;
-        }
-        let sources_left = handles.iter().any(|(_, sink, h)| !sink && !h.is_finished());
-        let sinks_left = handles.iter().any(|(_, sink, h)| *sink && !h.is_finished());
-        if has_sources && !plan.endless && !sources_left {
-            let t = *sources_done_at.get_or_insert_with(Instant::now);
-            if !sinks_left || t.elapsed() >= linger {
-                set_why(format!(
-                    "every source finished (the sinks had {:.1} s for the last frames)",
-                    linger.as_secs_f64()
-                ));
-                stopping();
-                stop.store(true, Ordering::SeqCst);
+    }
+
+    /// Stops the run for `why`.
+    fn stop_for(&self, why: String) {
+        self.set_why(why);
+        stopping();
+        self.stop.store(true, Ordering::SeqCst);
+    }
+
+    /// Watches the run until it stops: a signal, an adapter's stop, every source finished (when
+    /// `sources_end`; the sinks get `linger` for the last frames), no publisher for
+    /// `publishers_gone`, or every adapter finished.
+    fn supervise(&self, sources_end: bool, publishers_gone: Option<Duration>, linger: Duration) {
+        let mut sources_done_at: Option<Instant> = None;
+        loop {
+            if SIGNALLED.load(Ordering::SeqCst) {
+                self.stop_for("SIGINT/SIGTERM".into());
+            }
+            if self.stop.load(Ordering::SeqCst) {
                 break;
             }
-        }
-        if let Some(gone) = plan.publishers_gone {
-            let seen = upstream.load(Ordering::Relaxed);
-            if seen != 0 && monotonic_ns().saturating_sub(seen) >= gone.as_nanos() as u64 {
-                set_why(format!(
-                    "the streams this bridge reads have had no publisher for {:.1} s \
-                     (stop_after_publishers_gone)",
-                    gone.as_secs_f64()
-                ));
-                stopping();
-                stop.store(true, Ordering::SeqCst);
+            let left = |sinks: bool| {
+                self.handles
+                    .iter()
+                    .any(|(_, sink, h)| *sink == sinks && !h.is_finished())
+            };
+            let (sources_left, sinks_left) = (left(false), left(true));
+            if sources_end && !sources_left {
+                let t = *sources_done_at.get_or_insert_with(Instant::now);
+                if !sinks_left || t.elapsed() >= linger {
+                    self.stop_for(format!(
+                        "every source finished (the sinks had {:.1} s for the last frames)",
+                        linger.as_secs_f64()
+                    ));
+                    break;
+                }
+            }
+            if let Some(gone) = publishers_gone {
+                let seen = self.upstream.load(Ordering::Relaxed);
+                if seen != 0 && monotonic_ns().saturating_sub(seen) >= gone.as_nanos() as u64 {
+                    self.stop_for(format!(
+                        "the streams this bridge reads have had no publisher for {:.1} s \
+                         (stop_after_publishers_gone)",
+                        gone.as_secs_f64()
+                    ));
+                    break;
+                }
+            }
+            if !sinks_left && !sources_left {
+                self.stop_for("every adapter finished".into());
                 break;
             }
-        }
-        if !sinks_left && !sources_left {
-            set_why("every adapter finished".into());
-            stopping();
-            stop.store(true, Ordering::SeqCst);
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    // Also when an adapter stopped the run (a recorder's max_frames, a failure).
-    stopping();
-    let stopped_by = why
-        .lock()
-        .ok()
-        .and_then(|g| g.clone())
-        .unwrap_or_else(|| "stopped".into());
-    tracing::info!("stopping: {stopped_by}");
-    let mut reports = Vec::new();
-    let mut first_err = None;
-    for (name, _, h) in handles {
-        match h.join() {
-            Ok(Ok(r)) => reports.push(r),
-            Ok(Err(e)) => {
-                first_err.get_or_insert(e.context(name));
-            }
-            Err(_) => {
-                first_err.get_or_insert(anyhow::anyhow!("{name}: the adapter thread panicked"));
-            }
+            std::thread::sleep(Duration::from_millis(20));
         }
     }
-    match first_err {
-        Some(e) => Err(e),
-        None => Ok(Outcome {
-            reports,
-            stopped_by,
-        }),
+
+    /// Joins every adapter: their reports, or the first error.
+    fn finish(self) -> Result<Outcome> {
+        let stopped_by = self
+            .why
+            .lock()
+            .ok()
+            .and_then(|g| g.clone())
+            .unwrap_or_else(|| "stopped".into());
+        tracing::info!("stopping: {stopped_by}");
+        let mut reports = Vec::new();
+        let mut first_err = None;
+        for (name, _, h) in self.handles {
+            match h.join() {
+                Ok(Ok(r)) => reports.push(r),
+                Ok(Err(e)) => {
+                    first_err.get_or_insert(e.context(name));
+                }
+                Err(_) => {
+                    first_err.get_or_insert(anyhow::anyhow!("{name}: the adapter thread panicked"));
+                }
+            }
+        }
+        match first_err {
+            Some(e) => Err(e),
+            None => Ok(Outcome {
+                reports,
+                stopped_by,
+            }),
+        }
     }
 }
 
