@@ -109,35 +109,16 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
     } else {
         None
     };
-    let ros1_endpoint = || -> Result<Endpoint> {
-        Ok(Endpoint::Ros1(
-            ros1.clone().context("the ROS 1 node was not started")?,
-        ))
-    };
     if let Some(replay) = replay {
         endless |= replay.cfg.looped;
         let clock = if cfg.ros1.clock { ros1.clone() } else { None };
         sources.push(Box::new(ReplayAdapter { replay, clock }));
     }
     if !cfg.ingress.is_empty() {
-        let dds: Option<Arc<dyn DdsBackend>> =
-            if cfg.ingress.iter().any(|i| i.transport == Transport::Dds) {
-                Some(Arc::from(
-                    dds::backend(
-                        &cfg.dds.participant(),
-                        &format!("{}_ingress", cfg.bridge.name),
-                    )
-                    .context("dds (ingress participant)")?,
-                ))
-            } else {
-                None
-            };
+        let transports: Vec<Transport> = cfg.ingress.iter().map(|i| i.transport).collect();
+        let ends = Endpoints::open(cfg, &transports, "ingress", &ros1)?;
         endless = true;
         for i in &cfg.ingress {
-            let endpoint = match (i.transport, &dds) {
-                (Transport::Dds, Some(d)) => Endpoint::Dds(d.clone()),
-                _ => ros1_endpoint()?,
-            };
             sources.push(Box::new(Ingress {
                 spec: TopicSpec {
                     topic: i.topic.clone(),
@@ -145,7 +126,7 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
                     qos: i.qos,
                 },
                 stream: i.stream.clone(),
-                endpoint,
+                endpoint: ends.of(i.transport)?,
             }));
         }
     }
@@ -158,43 +139,10 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
         sources.push(Box::new(Synthetic::lidar(l.clone())));
     }
     if !cfg.egress.is_empty() {
-        let dds: Option<Arc<dyn DdsBackend>> =
-            if cfg.egress.iter().any(|e| e.transport == Transport::Dds) {
-                Some(Arc::from(
-                    dds::backend(
-                        &cfg.dds.participant(),
-                        &format!("{}_egress", cfg.bridge.name),
-                    )
-                    .context("dds (egress participant)")?,
-                ))
-            } else {
-                None
-            };
+        let transports: Vec<Transport> = cfg.egress.iter().map(|e| e.transport).collect();
+        let ends = Endpoints::open(cfg, &transports, "egress", &ros1)?;
         for (i, e) in cfg.egress.iter().enumerate() {
-            let kind = *kinds.get(&e.stream).with_context(|| {
-                format!(
-                    "egress[{i}].kind: nothing says what stream `{}` carries: add `kind = \"image\"` or `\"cloud\"`",
-                    e.stream
-                )
-            })?;
-            let ros_type = match kind {
-                StreamKind::Image => dds::RosType::Image,
-                StreamKind::Cloud => dds::RosType::PointCloud2,
-            };
-            sinks.push(Box::new(Egress {
-                stream: e.stream.clone(),
-                kind,
-                spec: TopicSpec {
-                    topic: e.topic.clone(),
-                    ros_type,
-                    qos: e.qos,
-                },
-                side: Side::Perturbed,
-                endpoint: match (e.transport, &dds) {
-                    (Transport::Dds, Some(d)) => Endpoint::Dds(d.clone()),
-                    _ => ros1_endpoint()?,
-                },
-            }));
+            sinks.push(egress_sink(i, e, &kinds, &ends)?);
         }
     }
     if let Some(r) = &cfg.record {
@@ -212,6 +160,82 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
             .stop_after_publishers_gone
             .map(Duration::from_secs_f64),
     })
+}
+
+/// Where the topics of one direction (ingress or egress) are opened: a DDS participant of its
+/// own when any topic of that direction is on DDS, and the bridge's ROS 1 node.
+struct Endpoints {
+    dds: Option<Arc<dyn DdsBackend>>,
+    ros1: Option<Arc<crate::ros1::Node>>,
+}
+
+impl Endpoints {
+    /// The endpoints for `transports` (the direction's topics), the participant named after
+    /// the bridge and `role`.
+    fn open(
+        cfg: &Config,
+        transports: &[Transport],
+        role: &str,
+        ros1: &Option<Arc<crate::ros1::Node>>,
+    ) -> Result<Endpoints> {
+        let dds: Option<Arc<dyn DdsBackend>> = if transports.contains(&Transport::Dds) {
+            Some(Arc::from(
+                dds::backend(
+                    &cfg.dds.participant(),
+                    &format!("{}_{role}", cfg.bridge.name),
+                )
+                .with_context(|| format!("dds ({role} participant)"))?,
+            ))
+        } else {
+            None
+        };
+        Ok(Endpoints {
+            dds,
+            ros1: ros1.clone(),
+        })
+    }
+
+    /// The endpoint of a topic on `transport`.
+    fn of(&self, transport: Transport) -> Result<Endpoint> {
+        match (transport, &self.dds) {
+            (Transport::Dds, Some(d)) => Ok(Endpoint::Dds(d.clone())),
+            _ => Ok(Endpoint::Ros1(
+                self.ros1
+                    .clone()
+                    .context("the ROS 1 node was not started")?,
+            )),
+        }
+    }
+}
+
+/// The sink of `[[egress]]` entry `i`: the perturbed side of its stream, on its topic.
+fn egress_sink(
+    i: usize,
+    e: &crate::config::EgressEntry,
+    kinds: &BTreeMap<String, StreamKind>,
+    ends: &Endpoints,
+) -> Result<Box<dyn Adapter>> {
+    let kind = *kinds.get(&e.stream).with_context(|| {
+        format!(
+            "egress[{i}].kind: nothing says what stream `{}` carries: add `kind = \"image\"` or `\"cloud\"`",
+            e.stream
+        )
+    })?;
+    let ros_type = match kind {
+        StreamKind::Image => dds::RosType::Image,
+        StreamKind::Cloud => dds::RosType::PointCloud2,
+    };
+    Ok(Box::new(Egress {
+        stream: e.stream.clone(),
+        kind,
+        spec: TopicSpec {
+            topic: e.topic.clone(),
+            ros_type,
+            qos: e.qos,
+        },
+        side: Side::Perturbed,
+        endpoint: ends.of(e.transport)?,
+    }))
 }
 
 static SIGNALLED: AtomicBool = AtomicBool::new(false);
