@@ -67,70 +67,29 @@ impl Adapter for Synthetic {
 
     fn run(self: Box<Self>, bus: &dyn Bus, mut ctl: Control) -> Result<AdapterReport> {
         let name = self.name();
-        let (stream, kind, rate, frame_id, prerender, count) = match &self.sensor {
+        let (stream, kind, rate, frame_id, count) = match &self.sensor {
             Sensor::Camera(c) => (
-                c.stream.clone(),
+                &c.stream,
                 StreamKind::Image,
                 c.rate_hz,
-                c.frame_id.clone(),
-                c.prerender,
+                &c.frame_id,
                 c.count,
             ),
             Sensor::Lidar(l) => (
-                l.stream.clone(),
+                &l.stream,
                 StreamKind::Cloud,
                 l.rate_hz,
-                l.frame_id.clone(),
-                l.prerender,
+                &l.frame_id,
                 l.count,
             ),
         };
-        let mut publisher = bus.publisher(&stream, kind, Side::Raw)?;
-        let render = |n: u64| -> OwnedPayload {
-            match &self.sensor {
-                Sensor::Camera(c) => OwnedPayload::Image {
-                    sec: 0,
-                    nanosec: 0,
-                    frame_id: frame_id.clone(),
-                    image: street_image(c.width, c.height, n),
-                },
-                Sensor::Lidar(_) => OwnedPayload::Cloud {
-                    sec: 0,
-                    nanosec: 0,
-                    frame_id: frame_id.clone(),
-                    cloud: vlp32c_scan(n),
-                },
-            }
+        let mut publisher = bus.publisher(stream, kind, Side::Raw)?;
+        let Some(cache) = self.prerender(&ctl, &name) else {
+            return Ok(AdapterReport {
+                name,
+                ..Default::default()
+            });
         };
-        let t = Instant::now();
-        // Frame by frame, so a stop (SIGINT) during a long pre-render is heeded at once; the
-        // size and the count were bounded by the configuration check.
-        let mut cache = match &self.sensor {
-            Sensor::Camera(_) => Frames::Images(Vec::with_capacity(prerender as usize)),
-            Sensor::Lidar(_) => Frames::Clouds(Vec::with_capacity(prerender as usize)),
-        };
-        for n in 0..prerender as u64 {
-            if ctl.stopped() {
-                tracing::info!("{name}: stopped while pre-rendering (frame {n} of {prerender})");
-                return Ok(AdapterReport {
-                    name,
-                    ..Default::default()
-                });
-            }
-            match (&mut cache, &self.sensor) {
-                (Frames::Images(v), Sensor::Camera(c)) => {
-                    v.push(street_image(c.width, c.height, n))
-                }
-                (Frames::Clouds(v), _) => v.push(vlp32c_scan(n)),
-                _ => unreachable!("the cache matches the sensor"),
-            }
-        }
-        if prerender > 0 {
-            tracing::info!(
-                "{name}: rendered {prerender} frames in {:.1} s",
-                t.elapsed().as_secs_f64()
-            );
-        }
         ctl.ready();
         let mut rep = AdapterReport {
             name: name.clone(),
@@ -150,32 +109,10 @@ impl Adapter for Synthetic {
             let header = Header {
                 stamp_sec: sec,
                 stamp_nanosec: nanosec,
-                frame_id: &frame_id,
+                frame_id,
             };
-            // Cached frames are lent as they are (no copy); live ones are rendered now.
-            let live;
-            let payload = match &cache {
-                Frames::Images(v) if !v.is_empty() => Payload::Image(ImageMsg::from_view(
-                    header,
-                    &v[(seq % v.len() as u64) as usize].view(),
-                )),
-                Frames::Clouds(v) if !v.is_empty() => Payload::Cloud(PointCloud2Msg::from_view(
-                    header,
-                    &v[(seq % v.len() as u64) as usize].view(),
-                )),
-                _ => {
-                    live = render(seq);
-                    match &live {
-                        OwnedPayload::Image { image, .. } => {
-                            Payload::Image(ImageMsg::from_view(header, &image.view()))
-                        }
-                        OwnedPayload::Cloud { cloud, .. } => {
-                            Payload::Cloud(PointCloud2Msg::from_view(header, &cloud.view()))
-                        }
-                        other => other.payload(),
-                    }
-                }
-            };
+            let mut live = None;
+            let payload = self.payload(&cache, &mut live, seq, header);
             rep.received += 1;
             let meta = FrameMeta {
                 seq,
@@ -198,4 +135,96 @@ impl Adapter for Synthetic {
         rep.undelivered = publisher.undelivered();
         Ok(rep)
     }
+}
+
+impl Synthetic {
+    /// Renders the frames kept for the run (`prerender` of them), frame by frame so that a stop
+    /// (SIGINT) during a long pre-render is heeded at once (None then); the size and the count
+    /// were bounded by the configuration check.
+    fn prerender(&self, ctl: &Control, name: &str) -> Option<Frames> {
+        let t = Instant::now();
+        let (cache, prerender) = match &self.sensor {
+            Sensor::Camera(c) => (
+                Frames::Images(render_all(c.prerender, ctl, name, |n| {
+                    street_image(c.width, c.height, n)
+                })?),
+                c.prerender,
+            ),
+            Sensor::Lidar(l) => (
+                Frames::Clouds(render_all(l.prerender, ctl, name, vlp32c_scan)?),
+                l.prerender,
+            ),
+        };
+        if prerender > 0 {
+            tracing::info!(
+                "{name}: rendered {prerender} frames in {:.1} s",
+                t.elapsed().as_secs_f64()
+            );
+        }
+        Some(cache)
+    }
+
+    /// Frame `seq` with `header`: a cached frame lent as it is (no copy), or one rendered now
+    /// into `live` when nothing was pre-rendered.
+    fn payload<'a>(
+        &self,
+        cache: &'a Frames,
+        live: &'a mut Option<OwnedPayload>,
+        seq: u64,
+        header: Header<'a>,
+    ) -> Payload<'a> {
+        match cache {
+            Frames::Images(v) if !v.is_empty() => Payload::Image(ImageMsg::from_view(
+                header,
+                &v[(seq % v.len() as u64) as usize].view(),
+            )),
+            Frames::Clouds(v) if !v.is_empty() => Payload::Cloud(PointCloud2Msg::from_view(
+                header,
+                &v[(seq % v.len() as u64) as usize].view(),
+            )),
+            _ => {
+                let rendered = match &self.sensor {
+                    Sensor::Camera(c) => OwnedPayload::Image {
+                        sec: 0,
+                        nanosec: 0,
+                        frame_id: header.frame_id.to_string(),
+                        image: street_image(c.width, c.height, seq),
+                    },
+                    Sensor::Lidar(_) => OwnedPayload::Cloud {
+                        sec: 0,
+                        nanosec: 0,
+                        frame_id: header.frame_id.to_string(),
+                        cloud: vlp32c_scan(seq),
+                    },
+                };
+                match live.insert(rendered) {
+                    OwnedPayload::Image { image, .. } => {
+                        Payload::Image(ImageMsg::from_view(header, &image.view()))
+                    }
+                    OwnedPayload::Cloud { cloud, .. } => {
+                        Payload::Cloud(PointCloud2Msg::from_view(header, &cloud.view()))
+                    }
+                    other => other.payload(),
+                }
+            }
+        }
+    }
+}
+
+/// Frames 0..count of `render`; None when the run is stopped part-way.
+fn render_all<T>(
+    count: u32,
+    ctl: &Control,
+    name: &str,
+    render: impl Fn(u64) -> T,
+) -> Option<Vec<T>> {
+    let mut frames = Vec::with_capacity(count as usize);
+    for n in 0..count as u64 {
+        if ctl.stopped() {
+            tracing::info!("{name}: stopped while pre-rendering (frame {n} of {count})");
+            return None;
+        }
+        frames.push(render(n));
+    }
+    Some(frames)
 }
