@@ -8,7 +8,7 @@ use crate::stats::Counters;
 use crossbeam::channel::{Receiver, Sender, TrySendError};
 use perturb_wire::header::MAGIC;
 use perturb_wire::iceoryx2::prelude::*;
-use perturb_wire::{FrameSubscriber, Ipc, LayoutCache, Origin, monotonic_ns};
+use perturb_wire::{Frame, FrameSubscriber, Ipc, LayoutCache, Origin, monotonic_ns};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tracing::{debug, error, info, warn};
@@ -61,9 +61,13 @@ pub(super) fn receive_loop(
     shutdown: &AtomicBool,
 ) {
     let name = rt.config.name.as_str();
-    let c = &rt.stats.counters;
-    let mut gaps = GapTracker::resume(c);
-    let mut layouts = LayoutCache::default();
+    let mut intake = Intake {
+        rt,
+        tx,
+        evict,
+        gaps: GapTracker::resume(&rt.stats.counters),
+        layouts: LayoutCache::default(),
+    };
     while !shutdown.load(Ordering::Relaxed) {
         let mut broken = false;
         // A reopen that failed left no ports: try again before waiting on them.
@@ -105,51 +109,7 @@ pub(super) fn receive_loop(
                 let _ = waitset
                     .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, TICK);
                 sub.drain_notifications();
-                loop {
-                    match sub.receive() {
-                        Ok(Some(frame)) => {
-                            let t_rx = monotonic_ns();
-                            Counters::add(&c.frames_in, 1);
-                            let h = frame.header();
-                            // Magic, version and seq keep their place in every wire version, so
-                            // even a frame this build cannot read is accounted for.
-                            if h.magic == MAGIC {
-                                let origin = frame.origin();
-                                let gap = gaps.observe(name, origin, h.seq);
-                                if gap > 0 {
-                                    let n = c.dropped_upstream.fetch_add(gap, Ordering::Relaxed);
-                                    if should_log(n + 1) {
-                                        warn!(
-                                            stream = name,
-                                            seq = h.seq,
-                                            missing = gap,
-                                            "frames lost before the daemon received them"
-                                        );
-                                    }
-                                }
-                                c.set_origin(origin.raw());
-                                c.last_seq_plus_one.store(h.seq + 1, Ordering::Relaxed);
-                            }
-                            // An invalid frame is counted and released here, so it never takes
-                            // a good frame's place in the queue.
-                            if let Err(e) = check(rt.config.modality, &frame, &mut layouts) {
-                                invalid(rt, frame.header().seq, &e);
-                                continue;
-                            }
-                            enqueue(rt, &tx, &evict, Item { frame, t_rx });
-                        }
-                        Ok(None) => break,
-                        Err(e) if e.is_borrow_limit() => {
-                            warn!(stream = name, "{e}");
-                            break;
-                        }
-                        Err(e) => {
-                            error!(stream = name, "{e}; reopening the input");
-                            broken = true;
-                            break;
-                        }
-                    }
-                }
+                broken = !intake.take_all(&sub);
             }
         }
         if broken && let Err(e) = sub.reopen() {
@@ -161,6 +121,75 @@ pub(super) fn receive_loop(
         }
     }
     debug!(stream = name, "receiver stopped");
+}
+
+/// What the receiver keeps between wake-ups: where frames go, and what it knows of the input.
+struct Intake<'a> {
+    rt: &'a StreamRuntime,
+    tx: Sender<Item>,
+    evict: Receiver<Item>,
+    gaps: GapTracker,
+    layouts: LayoutCache,
+}
+
+impl Intake<'_> {
+    /// Takes every queued sample of `sub`: counted, checked, queued. False when the input broke
+    /// (to be reopened).
+    fn take_all(&mut self, sub: &FrameSubscriber) -> bool {
+        let name = self.rt.config.name.as_str();
+        loop {
+            match sub.receive() {
+                Ok(Some(frame)) => {
+                    let t_rx = monotonic_ns();
+                    self.account(&frame);
+                    // An invalid frame is counted and released here, so it never takes a good
+                    // frame's place in the queue.
+                    if let Err(e) = check(self.rt.config.modality, &frame, &mut self.layouts) {
+                        invalid(self.rt, frame.header().seq, &e);
+                        continue;
+                    }
+                    enqueue(self.rt, &self.tx, &self.evict, Item { frame, t_rx });
+                }
+                Ok(None) => return true,
+                Err(e) if e.is_borrow_limit() => {
+                    warn!(stream = name, "{e}");
+                    return true;
+                }
+                Err(e) => {
+                    error!(stream = name, "{e}; reopening the input");
+                    return false;
+                }
+            }
+        }
+    }
+
+    /// Counts a received frame and the frames lost before it (a gap in its publisher's sequence
+    /// numbers). Magic, version and seq keep their place in every wire version, so even a frame
+    /// this build cannot read is accounted for.
+    fn account(&mut self, frame: &Frame) {
+        let c = &self.rt.stats.counters;
+        let name = self.rt.config.name.as_str();
+        Counters::add(&c.frames_in, 1);
+        let h = frame.header();
+        if h.magic != MAGIC {
+            return;
+        }
+        let origin = frame.origin();
+        let gap = self.gaps.observe(name, origin, h.seq);
+        if gap > 0 {
+            let n = c.dropped_upstream.fetch_add(gap, Ordering::Relaxed);
+            if should_log(n + 1) {
+                warn!(
+                    stream = name,
+                    seq = h.seq,
+                    missing = gap,
+                    "frames lost before the daemon received them"
+                );
+            }
+        }
+        c.set_origin(origin.raw());
+        c.last_seq_plus_one.store(h.seq + 1, Ordering::Relaxed);
+    }
 }
 
 /// Puts a frame in the queue; when it is full, drops the oldest waiting frame (counted).
