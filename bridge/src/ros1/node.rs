@@ -298,7 +298,6 @@ fn unregister_all(s: &Shared) {
 
 /// The slave API.
 fn slave_api(s: &Arc<Shared>, method: &str, args: &[Value]) -> Value {
-    let ok = |v: Value| Value::Array(vec![1.into(), "".into(), v]);
     let arg = |i: usize| args.get(i).and_then(Value::as_str).unwrap_or("");
     match method {
         "getPid" => ok((std::process::id() as i32).into()),
@@ -322,27 +321,21 @@ fn slave_api(s: &Arc<Shared>, method: &str, args: &[Value]) -> Value {
             }
             ok(Value::Array(rows))
         }
-        "getPublications" | "getSubscriptions" => {
-            let list: Vec<Value> = if method == "getPublications" {
-                s.pubs
-                    .lock()
-                    .map(|p| {
-                        p.values()
-                            .map(|p| Value::Array(vec![p.topic.clone().into(), p.ty.name.into()]))
-                            .collect()
-                    })
-                    .unwrap_or_default()
-            } else {
-                s.subs
-                    .lock()
-                    .map(|p| {
-                        p.values()
-                            .map(|p| Value::Array(vec![p.topic.clone().into(), p.ty.name.into()]))
-                            .collect()
-                    })
-                    .unwrap_or_default()
-            };
-            ok(Value::Array(list))
+        "getPublications" => {
+            let list = s.pubs.lock().map(|p| {
+                p.values()
+                    .map(|p| topic_and_type(&p.topic, p.ty.name))
+                    .collect()
+            });
+            ok(Value::Array(list.unwrap_or_default()))
+        }
+        "getSubscriptions" => {
+            let list = s.subs.lock().map(|p| {
+                p.values()
+                    .map(|p| topic_and_type(&p.topic, p.ty.name))
+                    .collect()
+            });
+            ok(Value::Array(list.unwrap_or_default()))
         }
         "paramUpdate" => ok(0.into()),
         "shutdown" => {
@@ -353,67 +346,80 @@ fn slave_api(s: &Arc<Shared>, method: &str, args: &[Value]) -> Value {
             );
             ok(0.into())
         }
-        "publisherUpdate" => {
-            let topic = arg(1);
-            let uris: Vec<String> = args
-                .get(2)
-                .and_then(Value::as_array)
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|v| v.as_str().map(str::to_string))
-                        .collect()
-                })
-                .unwrap_or_default();
-            let sub = s.subs.lock().ok().and_then(|m| m.get(topic).cloned());
-            match sub {
-                Some(sub) => {
-                    sub.update_publishers(&uris, s);
-                    ok(0.into())
-                }
-                None => Value::Array(vec![
-                    0.into(),
-                    format!("not subscribed to [{topic}]").into(),
-                    0.into(),
-                ]),
-            }
-        }
-        "requestTopic" => {
-            let topic = arg(1);
-            let publishes = s.pubs.lock().is_ok_and(|p| p.contains_key(topic));
-            let tcpros = args.get(2).and_then(Value::as_array).is_some_and(|a| {
-                a.iter().any(|p| {
-                    p.as_array().and_then(|p| p.first()).and_then(Value::as_str) == Some("TCPROS")
-                })
-            });
-            if !publishes {
-                Value::Array(vec![
-                    (-1).into(),
-                    format!("Not a publisher of [{topic}]").into(),
-                    Value::Array(vec![]),
-                ])
-            } else if !tcpros {
-                Value::Array(vec![
-                    0.into(),
-                    "no supported protocol implementations".into(),
-                    Value::Array(vec![]),
-                ])
-            } else {
-                Value::Array(vec![
-                    1.into(),
-                    format!("ready on {}:{}", s.host, s.tcpros_port).into(),
-                    Value::Array(vec![
-                        "TCPROS".into(),
-                        s.host.clone().into(),
-                        (s.tcpros_port as i32).into(),
-                    ]),
-                ])
-            }
-        }
+        "publisherUpdate" => publisher_update(s, arg(1), args.get(2)),
+        "requestTopic" => request_topic(s, arg(1), args.get(2)),
         other => Value::Array(vec![
             (-1).into(),
             format!("method `{other}` is not supported").into(),
             0.into(),
         ]),
+    }
+}
+
+/// A successful slave API reply carrying `v`.
+fn ok(v: Value) -> Value {
+    Value::Array(vec![1.into(), "".into(), v])
+}
+
+/// A `[topic, type]` pair of `getPublications` / `getSubscriptions`.
+fn topic_and_type(topic: &str, ty: &str) -> Value {
+    Value::Array(vec![topic.to_string().into(), ty.into()])
+}
+
+/// `publisherUpdate`: the master's current publishers of `topic` (`uris`), for our subscription.
+fn publisher_update(s: &Arc<Shared>, topic: &str, uris: Option<&Value>) -> Value {
+    let uris: Vec<String> = uris
+        .and_then(Value::as_array)
+        .map(|a| {
+            a.iter()
+                .filter_map(|v| v.as_str().map(str::to_string))
+                .collect()
+        })
+        .unwrap_or_default();
+    let sub = s.subs.lock().ok().and_then(|m| m.get(topic).cloned());
+    match sub {
+        Some(sub) => {
+            sub.update_publishers(&uris, s);
+            ok(0.into())
+        }
+        None => Value::Array(vec![
+            0.into(),
+            format!("not subscribed to [{topic}]").into(),
+            0.into(),
+        ]),
+    }
+}
+
+/// `requestTopic`: where a subscriber connects for `topic`, if we publish it and it offers
+/// TCPROS among `protocols`.
+fn request_topic(s: &Arc<Shared>, topic: &str, protocols: Option<&Value>) -> Value {
+    let publishes = s.pubs.lock().is_ok_and(|p| p.contains_key(topic));
+    let tcpros = protocols.and_then(Value::as_array).is_some_and(|a| {
+        a.iter()
+            .any(|p| p.as_array().and_then(|p| p.first()).and_then(Value::as_str) == Some("TCPROS"))
+    });
+    if !publishes {
+        Value::Array(vec![
+            (-1).into(),
+            format!("Not a publisher of [{topic}]").into(),
+            Value::Array(vec![]),
+        ])
+    } else if !tcpros {
+        Value::Array(vec![
+            0.into(),
+            "no supported protocol implementations".into(),
+            Value::Array(vec![]),
+        ])
+    } else {
+        Value::Array(vec![
+            1.into(),
+            format!("ready on {}:{}", s.host, s.tcpros_port).into(),
+            Value::Array(vec![
+                "TCPROS".into(),
+                s.host.clone().into(),
+                (s.tcpros_port as i32).into(),
+            ]),
+        ])
     }
 }
 
