@@ -378,54 +378,14 @@ pub fn run(a: Args) -> Result<()> {
         .clone()
         .or_else(|| a.out.as_ref().map(|o| o.join("map.png")));
     if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        use perturb_study::Format as F;
-        for (name, f) in [("md", F::Markdown), ("csv", F::Csv)] {
-            write(
-                &dir.join(format!("runs.{name}")),
-                &render_runs(&analysis.runs, f),
-            )?;
-            write(
-                &dir.join(format!("segments.{name}")),
-                &render_segments(&analysis.segments, f),
-            )?;
-            write(
-                &dir.join(format!("conditions.{name}")),
-                &render_conditions(&analysis.conditions, f),
-            )?;
-            write(
-                &dir.join(format!("perturbations.{name}")),
-                &render_perturbations(&analysis.perturbations, f),
-            )?;
-            write(
-                &dir.join(format!("hotspots.{name}")),
-                &perturb_study::hotspots::render(&hot, f),
-            )?;
-        }
-        write(&dir.join("analysis.json"), &analysis_json(&analysis, &hot))?;
+        write_outputs(dir, &analysis, &hot)?;
     }
     if let Some(path) = &map_path {
-        match perturb_study::plot::trajectory_map(
-            cfg.route.as_ref(),
-            &analysis.runs,
-            &hot,
-            &perturb_study::plot::MapOptions {
-                width: a.map_width,
-                ..Default::default()
-            },
-        ) {
-            Some(img) => perturb_study::files::save_image(
-                path,
-                &img.view(),
-                perturb_core::formats::FileKind::Png,
-            )?,
-            None => eprintln!("no map: nothing to draw"),
-        }
+        draw_map(path, cfg.route.as_ref(), &analysis, &hot, a.map_width)?;
     }
     if a.json {
         print!("{}", analysis_json(&analysis, &hot));
     } else {
-        let format: perturb_study::Format = a.format;
         let tables = if a.table.is_empty() {
             vec![
                 TableKind::Runs,
@@ -436,33 +396,7 @@ pub fn run(a: Args) -> Result<()> {
         } else {
             a.table.clone()
         };
-        for (k, t) in tables.iter().enumerate() {
-            let (title, body) = match t {
-                TableKind::Runs => ("runs", render_runs(&analysis.runs, format)),
-                TableKind::Segments => ("segments", render_segments(&analysis.segments, format)),
-                TableKind::Conditions => (
-                    "per (perturbation, severity)",
-                    render_conditions(&analysis.conditions, format),
-                ),
-                TableKind::Perturbations => (
-                    "per perturbation",
-                    render_perturbations(&analysis.perturbations, format),
-                ),
-                TableKind::Hotspots => (
-                    "failure hotspots",
-                    perturb_study::hotspots::render(&hot, format),
-                ),
-            };
-            if k > 0 {
-                println!();
-            }
-            match format {
-                perturb_study::Format::Csv => println!("# {title}"),
-                perturb_study::Format::Markdown => println!("### {title}\n"),
-                _ => println!("== {title}"),
-            }
-            print!("{body}");
-        }
+        print_tables(&tables, &analysis, &hot, a.format);
     }
     for r in &analysis.runs {
         for n in &r.notes {
@@ -486,6 +420,119 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     Ok(())
+}
+
+impl TableKind {
+    /// Every table, in the order of the files written to `--out`.
+    const ALL: [TableKind; 5] = [
+        TableKind::Runs,
+        TableKind::Segments,
+        TableKind::Conditions,
+        TableKind::Perturbations,
+        TableKind::Hotspots,
+    ];
+
+    /// The table's file name in `--out` (without the extension).
+    fn file_stem(self) -> &'static str {
+        match self {
+            TableKind::Runs => "runs",
+            TableKind::Segments => "segments",
+            TableKind::Conditions => "conditions",
+            TableKind::Perturbations => "perturbations",
+            TableKind::Hotspots => "hotspots",
+        }
+    }
+
+    /// The table's title when printed.
+    fn title(self) -> &'static str {
+        match self {
+            TableKind::Runs => "runs",
+            TableKind::Segments => "segments",
+            TableKind::Conditions => "per (perturbation, severity)",
+            TableKind::Perturbations => "per perturbation",
+            TableKind::Hotspots => "failure hotspots",
+        }
+    }
+
+    /// The table in `format`.
+    fn render(
+        self,
+        analysis: &perturb_study::analyze::Analysis,
+        hot: &perturb_study::hotspots::Hotspots,
+        format: perturb_study::Format,
+    ) -> String {
+        match self {
+            TableKind::Runs => render_runs(&analysis.runs, format),
+            TableKind::Segments => render_segments(&analysis.segments, format),
+            TableKind::Conditions => render_conditions(&analysis.conditions, format),
+            TableKind::Perturbations => render_perturbations(&analysis.perturbations, format),
+            TableKind::Hotspots => perturb_study::hotspots::render(hot, format),
+        }
+    }
+}
+
+/// Every table as markdown and CSV, and analysis.json, into `dir`.
+fn write_outputs(
+    dir: &Path,
+    analysis: &perturb_study::analyze::Analysis,
+    hot: &perturb_study::hotspots::Hotspots,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    use perturb_study::Format as F;
+    for (ext, f) in [("md", F::Markdown), ("csv", F::Csv)] {
+        for t in TableKind::ALL {
+            write(
+                &dir.join(format!("{}.{ext}", t.file_stem())),
+                &t.render(analysis, hot, f),
+            )?;
+        }
+    }
+    write(&dir.join("analysis.json"), &analysis_json(analysis, hot))
+}
+
+/// The trajectory map with the failure hotspots, as a PNG at `path` (nothing when there is
+/// nothing to draw).
+fn draw_map(
+    path: &Path,
+    route: Option<&perturb_study::route::Route>,
+    analysis: &perturb_study::analyze::Analysis,
+    hot: &perturb_study::hotspots::Hotspots,
+    width: u32,
+) -> Result<()> {
+    let options = perturb_study::plot::MapOptions {
+        width,
+        ..Default::default()
+    };
+    match perturb_study::plot::trajectory_map(route, &analysis.runs, hot, &options) {
+        Some(img) => perturb_study::files::save_image(
+            path,
+            &img.view(),
+            perturb_core::formats::FileKind::Png,
+        )?,
+        None => eprintln!("no map: nothing to draw"),
+    }
+    Ok(())
+}
+
+/// `tables` printed one after the other with their titles.
+fn print_tables(
+    tables: &[TableKind],
+    analysis: &perturb_study::analyze::Analysis,
+    hot: &perturb_study::hotspots::Hotspots,
+    format: perturb_study::Format,
+) {
+    for (k, t) in tables.iter().enumerate() {
+        if k > 0 {
+            println!();
+        }
+        let title = t.title();
+        match format {
+            perturb_study::Format::Csv => println!("# {title}"),
+            perturb_study::Format::Markdown => println!("### {title}\n"),
+            _ => println!("== {title}"),
+        }
+        print!("{}", t.render(analysis, hot, format));
+    }
 }
 
 fn analysis_json(
