@@ -6,7 +6,7 @@ use perturb_core::formats::FileKind;
 use perturb_study::files::{Loaded, load};
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `perturb info`.
 #[derive(clap::Args)]
@@ -22,39 +22,50 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         FileKind::from_path(&a.input)?
     };
-    if kind != FileKind::Mcap {
-        match load(&a.input)? {
-            Loaded::Image(img, _) => println!("image {}x{} {}", img.width, img.height, img.format),
-            Loaded::Cloud(c, kind, meta) => {
-                let fields: Vec<String> = c
-                    .layout
-                    .fields
-                    .iter()
-                    .map(|f| format!("{}@{}:{:?}x{}", f.name, f.offset, f.datatype, f.count))
-                    .collect();
-                println!(
-                    "point cloud {} points ({}x{}), point_step {}, fields {}{}",
-                    c.len(),
-                    c.height,
-                    c.width,
-                    c.layout.point_step,
-                    fields.join(" "),
-                    meta.map(|(d, _)| format!(", PCD data {d:?}"))
-                        .unwrap_or_default()
-                );
-                let sensor = perturb_study::files::sensor_for(Some(kind), None, None, None)?;
-                println!(
-                    "sensor model assumed: {} (from the file kind; --sensor, --forward and --intensity-max change it in the other commands)",
-                    sensor.describe()
-                );
-            }
-        }
-        return Ok(());
+    if kind == FileKind::Mcap {
+        bag_info(&a.input)
+    } else {
+        file_info(&a.input)
     }
-    let bag = Bag::open(&a.input)?;
+}
+
+/// One image or point-cloud file: its size, layout and the sensor model assumed for it.
+fn file_info(path: &Path) -> Result<()> {
+    match load(path)? {
+        Loaded::Image(img, _) => println!("image {}x{} {}", img.width, img.height, img.format),
+        Loaded::Cloud(c, kind, meta) => {
+            let fields: Vec<String> = c
+                .layout
+                .fields
+                .iter()
+                .map(|f| format!("{}@{}:{:?}x{}", f.name, f.offset, f.datatype, f.count))
+                .collect();
+            println!(
+                "point cloud {} points ({}x{}), point_step {}, fields {}{}",
+                c.len(),
+                c.height,
+                c.width,
+                c.layout.point_step,
+                fields.join(" "),
+                meta.map(|(d, _)| format!(", PCD data {d:?}"))
+                    .unwrap_or_default()
+            );
+            let sensor = perturb_study::files::sensor_for(Some(kind), None, None, None)?;
+            println!(
+                "sensor model assumed: {} (from the file kind; --sensor, --forward and --intensity-max change it in the other commands)",
+                sensor.describe()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// A bag: its topics, what each sensor topic carries (every message decoded), notes and damage.
+fn bag_info(path: &Path) -> Result<()> {
+    let bag = Bag::open(path)?;
     println!(
         "bag {} ({}, {})",
-        a.input.display(),
+        path.display(),
         bag.format_name(),
         if bag.is_indexed() {
             "indexed"
@@ -73,35 +84,12 @@ pub fn run(a: Args) -> Result<()> {
     let mut summary: BTreeMap<String, String> = BTreeMap::new();
     let mut errors = Vec::new();
     let report = bag.for_each(&Filter::default(), |m| {
-        match m.decode() {
-            Some(Ok(SensorMessage::Image(img))) => match img.view() {
-                Ok(v) => {
-                    summary.insert(
-                        m.topic.to_string(),
-                        format!("image {}x{} {}", v.width, v.height, v.format),
-                    );
-                }
-                Err(e) => errors.push(format!("{} @ {}: {e}", m.topic, m.log_time)),
-            },
-            Some(Ok(SensorMessage::Compressed(c))) => {
-                summary.insert(
-                    m.topic.to_string(),
-                    format!("compressed image ({}, {} bytes)", c.format, c.data.len()),
-                );
+        match describe(&m) {
+            Ok(Some(s)) => {
+                summary.insert(m.topic.to_string(), s);
             }
-            Some(Ok(SensorMessage::Cloud(c))) => match c.view() {
-                Ok(v) => {
-                    let names: Vec<&str> =
-                        v.layout().fields.iter().map(|f| f.name.as_str()).collect();
-                    summary.insert(
-                        m.topic.to_string(),
-                        format!("point cloud {} points, fields {}", v.len(), names.join(",")),
-                    );
-                }
-                Err(e) => errors.push(format!("{} @ {}: {e}", m.topic, m.log_time)),
-            },
-            Some(Err(e)) => errors.push(e.to_string()),
-            None => {}
+            Ok(None) => {}
+            Err(e) => errors.push(e),
         }
         Ok(ControlFlow::Continue(()))
     })?;
@@ -129,4 +117,31 @@ pub fn run(a: Args) -> Result<()> {
         bail!("{} invalid messages", errors.len());
     }
     Ok(())
+}
+
+/// What a sensor message carries (None for other messages), or why it is invalid.
+fn describe(m: &perturb_bag::BagMessage<'_>) -> std::result::Result<Option<String>, String> {
+    let invalid = |e: &dyn std::fmt::Display| format!("{} @ {}: {e}", m.topic, m.log_time);
+    Ok(match m.decode() {
+        Some(Ok(SensorMessage::Image(img))) => {
+            let v = img.view().map_err(|e| invalid(&e))?;
+            Some(format!("image {}x{} {}", v.width, v.height, v.format))
+        }
+        Some(Ok(SensorMessage::Compressed(c))) => Some(format!(
+            "compressed image ({}, {} bytes)",
+            c.format,
+            c.data.len()
+        )),
+        Some(Ok(SensorMessage::Cloud(c))) => {
+            let v = c.view().map_err(|e| invalid(&e))?;
+            let names: Vec<&str> = v.layout().fields.iter().map(|f| f.name.as_str()).collect();
+            Some(format!(
+                "point cloud {} points, fields {}",
+                v.len(),
+                names.join(",")
+            ))
+        }
+        Some(Err(e)) => return Err(e.to_string()),
+        None => None,
+    })
 }
