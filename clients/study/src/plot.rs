@@ -207,35 +207,20 @@ pub fn trajectory_map(
         }
     }
     let span = [(max[0] - min[0]).max(1.0), (max[1] - min[1]).max(1.0)];
-    let legend_h = 120.0;
     let margin = 30.0;
     let width = opts.width.max(200);
     let scale = (width as f64 - 2.0 * margin) / span[0];
     let scale = scale.min((2.0 * width as f64 - 2.0 * margin) / span[1]);
-    let height = (span[1] * scale + 2.0 * margin + legend_h).ceil() as u32;
+    let height = (span[1] * scale + 2.0 * margin + LEGEND_H).ceil() as u32;
     let mut img = Image::new(width, height, PixelFormat::Rgb8);
     img.data.fill(255);
     let view = View {
         min,
         scale,
         margin,
-        height: height - legend_h as u32,
+        height: height - LEGEND_H as u32,
     };
-    // Families in order of appearance get colours; nominal is grey.
-    let mut colours: BTreeMap<String, [u8; 3]> = BTreeMap::new();
-    let mut order: Vec<String> = Vec::new();
-    let mut colour_of = |label: &str| -> [u8; 3] {
-        let fam = family_of(label);
-        if fam == "nominal" {
-            return GREY;
-        }
-        if !colours.contains_key(&fam) {
-            let c = PALETTE[order.len() % PALETTE.len()];
-            colours.insert(fam.clone(), c);
-            order.push(fam.clone());
-        }
-        colours[&fam]
-    };
+    let mut colours = FamilyColours::default();
     if let Some(r) = route {
         for w in r.points.windows(2) {
             thick_line(&mut img, view.px(w[0]), view.px(w[1]), 7, ROUTE);
@@ -243,10 +228,43 @@ pub fn trajectory_map(
     }
     for run in runs {
         for w in run.trajectory.windows(2) {
-            let c = colour_of(&w[1].1.label());
+            let c = colours.of(&w[1].1.label());
             thick_line(&mut img, view.px(w[0].0), view.px(w[1].0), 2, c);
         }
     }
+    draw_hotspots(&mut img, &view, hotspots);
+    draw_legend(&mut img, opts, hotspots, &colours);
+    Some(img)
+}
+
+/// Height of the legend below the map, pixels.
+const LEGEND_H: f64 = 120.0;
+
+/// A colour per perturbation family, in order of appearance; nominal is grey.
+#[derive(Default)]
+struct FamilyColours {
+    colours: BTreeMap<String, [u8; 3]>,
+    order: Vec<String>,
+}
+
+impl FamilyColours {
+    /// The colour of the family of condition `label`.
+    fn of(&mut self, label: &str) -> [u8; 3] {
+        let fam = family_of(label);
+        if fam == "nominal" {
+            return GREY;
+        }
+        if !self.colours.contains_key(&fam) {
+            let c = PALETTE[self.order.len() % PALETTE.len()];
+            self.colours.insert(fam.clone(), c);
+            self.order.push(fam.clone());
+        }
+        self.colours[&fam]
+    }
+}
+
+/// The hotspots' outlines and names, and a marker per failure (grey when in no hotspot).
+fn draw_hotspots(img: &mut Image, view: &View, hotspots: &Hotspots) {
     for (i, c) in hotspots.clusters.iter().enumerate() {
         let pts: Vec<(i32, i32)> = hotspots
             .failures
@@ -254,33 +272,37 @@ pub fn trajectory_map(
             .filter(|f| f.cluster == Some(i))
             .map(|f| view.px(f.position))
             .collect();
-        outline(&mut img, &pts, 12, [200, 0, 0]);
+        outline(img, &pts, 12, [200, 0, 0]);
         let (x, y) = view.px(c.centre);
-        draw_text(&mut img, x + 14, y - 18, &format!("H{i}"), 2, [200, 0, 0]);
+        draw_text(img, x + 14, y - 18, &format!("H{i}"), 2, [200, 0, 0]);
     }
     for f in &hotspots.failures {
-        marker(
-            &mut img,
-            view.px(f.position),
-            f.failure,
-            5,
-            f.cluster.is_none(),
-        );
+        marker(img, view.px(f.position), f.failure, 5, f.cluster.is_none());
     }
-    // Legend.
-    let mut y = (height - legend_h as u32 + 10) as i32;
-    draw_text(&mut img, 10, 6, &opts.title, 2, [0, 0, 0]);
+}
+
+/// The title, then below the map: the families' colours, the failure markers and how the
+/// hotspots were found.
+fn draw_legend(img: &mut Image, opts: &MapOptions, hotspots: &Hotspots, colours: &FamilyColours) {
+    let (width, height) = (img.width, img.height);
+    let mut y = (height - LEGEND_H as u32 + 10) as i32;
+    draw_text(img, 10, 6, &opts.title, 2, [0, 0, 0]);
     let mut x = 10;
     let mut entries: Vec<(String, [u8; 3])> = vec![("nominal".into(), GREY)];
-    entries.extend(order.iter().map(|f| (f.clone(), colours[f])));
+    entries.extend(
+        colours
+            .order
+            .iter()
+            .map(|f| (f.clone(), colours.colours[f])),
+    );
     for (name, c) in entries {
         let w = text_width(&name, 1) as i32 + 30;
         if x + w > width as i32 - 10 {
             x = 10;
             y += 14;
         }
-        thick_line(&mut img, (x, y + 3), (x + 16, y + 3), 3, c);
-        draw_text(&mut img, x + 20, y, &name, 1, [0, 0, 0]);
+        thick_line(img, (x, y + 3), (x + 16, y + 3), 3, c);
+        draw_text(img, x + 20, y, &name, 1, [0, 0, 0]);
         x += w;
     }
     y += 22;
@@ -295,13 +317,13 @@ pub fn trajectory_map(
         Failure::Timeout,
     ] {
         let name = f.name();
-        marker(&mut img, (x + 5, y + 3), f, 5, false);
-        draw_text(&mut img, x + 14, y, name, 1, [0, 0, 0]);
+        marker(img, (x + 5, y + 3), f, 5, false);
+        draw_text(img, x + 14, y, name, 1, [0, 0, 0]);
         x += text_width(name, 1) as i32 + 30;
     }
     y += 18;
     draw_text(
-        &mut img,
+        img,
         10,
         y,
         &format!(
@@ -311,7 +333,6 @@ pub fn trajectory_map(
         1,
         [0, 0, 0],
     );
-    Some(img)
 }
 
 #[cfg(test)]
