@@ -266,35 +266,8 @@ pub fn transfer(
                 .into(),
         ));
     }
-    let pick = |asked: &[String], defaults: &[&str], t: &MetricTable, which: &str| {
-        let have = columns(t);
-        if asked.is_empty() {
-            let v: Vec<String> = defaults
-                .iter()
-                .filter(|d| have.iter().any(|h| h == *d))
-                .map(|d| d.to_string())
-                .collect();
-            if v.is_empty() {
-                return Err(StudyError::Config(format!(
-                    "the {which} table has none of the default metrics ({}); its columns: {}; choose with --{which}-metric",
-                    defaults.join(", "),
-                    have.join(", ")
-                )));
-            }
-            return Ok(v);
-        }
-        for a in asked {
-            if !have.contains(a) {
-                return Err(StudyError::Config(format!(
-                    "the {which} table has no metric `{a}` (its columns: {})",
-                    have.join(", ")
-                )));
-            }
-        }
-        Ok(asked.to_vec())
-    };
-    let off = pick(&cfg.offline_metrics, &DEFAULT_OFFLINE, offline, "offline")?;
-    let cl = pick(
+    let off = pick_metrics(&cfg.offline_metrics, &DEFAULT_OFFLINE, offline, "offline")?;
+    let cl = pick_metrics(
         &cfg.closed_loop_metrics,
         &DEFAULT_CLOSED_LOOP,
         closed_loop,
@@ -303,51 +276,7 @@ pub fn transfer(
     let mut rows = Vec::new();
     for o in &off {
         for c in &cl {
-            let pairs: Vec<(&(String, u8), f64, f64)> = keys
-                .iter()
-                .filter_map(|k| {
-                    let x = *offline[*k].get(o)?;
-                    let y = *closed_loop[*k].get(c)?;
-                    (x.is_finite() && y.is_finite()).then_some((*k, x, y))
-                })
-                .collect();
-            let x: Vec<f64> = pairs.iter().map(|p| p.1).collect();
-            let y: Vec<f64> = pairs.iter().map(|p| p.2).collect();
-            let rho = stats::spearman(&x, &y);
-            let p = rho.and_then(|r| stats::spearman_p(r, x.len()));
-            let ci = rho.and_then(|_| {
-                stats::bootstrap_spearman_ci(&x, &y, cfg.resamples, cfg.seed, cfg.level)
-            });
-            let worse = |name: &str, v: &[f64]| -> Vec<f64> {
-                if SMALLER_IS_WORSE.contains(&name) {
-                    v.iter().map(|x| -x).collect()
-                } else {
-                    v.to_vec()
-                }
-            };
-            let (wx, wy) = (worse(o, &x), worse(c, &y));
-            let top = |v: &[f64]| -> Vec<String> {
-                let mut idx: Vec<usize> = (0..v.len()).collect();
-                idx.sort_by(|&i, &j| v[j].total_cmp(&v[i]).then(i.cmp(&j)));
-                idx.iter()
-                    .take(cfg.top_k)
-                    .map(|&i| format!("{} s{}", pairs[i].0.0, pairs[i].0.1))
-                    .collect()
-            };
-            rows.push(TransferRow {
-                offline: o.clone(),
-                closed_loop: c.clone(),
-                n: x.len(),
-                rho,
-                ci_low: ci.map(|c| c.0),
-                ci_high: ci.map(|c| c.1),
-                resamples_used: ci.map_or(0, |c| c.2),
-                p,
-                q: None,
-                top_k_overlap: stats::top_k_overlap(&wx, &wy, cfg.top_k),
-                top_offline: top(&wx),
-                top_closed_loop: top(&wy),
-            });
+            rows.push(transfer_row(&keys, offline, closed_loop, (o, c), cfg));
         }
     }
     let ps: Vec<f64> = rows.iter().map(|r| r.p.unwrap_or(f64::NAN)).collect();
@@ -363,6 +292,96 @@ pub fn transfer(
         level: cfg.level,
         rows,
     })
+}
+
+/// The metrics of `t` to correlate: those `asked` (each must be a column), or the `defaults` the
+/// table has.
+fn pick_metrics(
+    asked: &[String],
+    defaults: &[&str],
+    t: &MetricTable,
+    which: &str,
+) -> Result<Vec<String>> {
+    let have = columns(t);
+    if asked.is_empty() {
+        let v: Vec<String> = defaults
+            .iter()
+            .filter(|d| have.iter().any(|h| h == *d))
+            .map(|d| d.to_string())
+            .collect();
+        if v.is_empty() {
+            return Err(StudyError::Config(format!(
+                "the {which} table has none of the default metrics ({}); its columns: {}; choose with --{which}-metric",
+                defaults.join(", "),
+                have.join(", ")
+            )));
+        }
+        return Ok(v);
+    }
+    for a in asked {
+        if !have.contains(a) {
+            return Err(StudyError::Config(format!(
+                "the {which} table has no metric `{a}` (its columns: {})",
+                have.join(", ")
+            )));
+        }
+    }
+    Ok(asked.to_vec())
+}
+
+/// The correlation of offline metric `o` with closed-loop metric `c` over the matched `keys`
+/// where both are finite (q filled in later, over every row).
+fn transfer_row(
+    keys: &[&(String, u8)],
+    offline: &MetricTable,
+    closed_loop: &MetricTable,
+    (o, c): (&str, &str),
+    cfg: &TransferConfig,
+) -> TransferRow {
+    let pairs: Vec<(&(String, u8), f64, f64)> = keys
+        .iter()
+        .filter_map(|k| {
+            let x = *offline[*k].get(o)?;
+            let y = *closed_loop[*k].get(c)?;
+            (x.is_finite() && y.is_finite()).then_some((*k, x, y))
+        })
+        .collect();
+    let x: Vec<f64> = pairs.iter().map(|p| p.1).collect();
+    let y: Vec<f64> = pairs.iter().map(|p| p.2).collect();
+    let rho = stats::spearman(&x, &y);
+    let p = rho.and_then(|r| stats::spearman_p(r, x.len()));
+    let ci =
+        rho.and_then(|_| stats::bootstrap_spearman_ci(&x, &y, cfg.resamples, cfg.seed, cfg.level));
+    let worse = |name: &str, v: &[f64]| -> Vec<f64> {
+        if SMALLER_IS_WORSE.contains(&name) {
+            v.iter().map(|x| -x).collect()
+        } else {
+            v.to_vec()
+        }
+    };
+    let (wx, wy) = (worse(o, &x), worse(c, &y));
+    let top = |v: &[f64]| -> Vec<String> {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|&i, &j| v[j].total_cmp(&v[i]).then(i.cmp(&j)));
+        idx.iter()
+            .take(cfg.top_k)
+            .map(|&i| format!("{} s{}", pairs[i].0.0, pairs[i].0.1))
+            .collect()
+    };
+    TransferRow {
+        offline: o.to_string(),
+        closed_loop: c.to_string(),
+        n: x.len(),
+        rho,
+        ci_low: ci.map(|c| c.0),
+        ci_high: ci.map(|c| c.1),
+        resamples_used: ci.map_or(0, |c| c.2),
+        p,
+        q: None,
+        top_k_overlap: stats::top_k_overlap(&wx, &wy, cfg.top_k),
+        top_offline: top(&wx),
+        top_closed_loop: top(&wy),
+    }
 }
 
 /// The analysis as a table.
