@@ -31,19 +31,7 @@ pub fn perturb_bag(
     topics: &[String],
     progress: &dyn Progress,
 ) -> Result<u64> {
-    let topics_in = bag.topics()?;
-    let format = if bag.is_ros1_bag() || topics_in.iter().any(|t| t.message_encoding == "ros1") {
-        BagFormat::Ros1
-    } else {
-        BagFormat::Rosbag2
-    };
-    let mut w = AnyWriter::create(out, format, None)?;
-    let mut channel = HashMap::new();
-    for t in &topics_in {
-        let id = w.add_topic_like(t)?;
-        channel.insert(t.topic.clone(), id);
-    }
-    let events = w.add_topic(EVENTS_TOPIC, EVENTS_TYPE)?;
+    let (mut w, format, channel, events) = open_output(bag, out)?;
     let mut camera = match spec.entry.modality {
         Modality::Camera => Some(CameraPerturber::from_spec(spec)?),
         Modality::Lidar => None,
@@ -83,20 +71,9 @@ pub fn perturb_bag(
             None => (m.data.to_vec(), None),
         };
         w.write(ch, m.log_time, m.publish_time, &bytes)?;
-        if let Some(((sec, nsec, frame), seq)) = header {
+        if let Some((header, seq)) = header {
             *perturbed.entry(m.topic.to_string()).or_default() += 1;
-            let ev = PerturbationEvent {
-                topic: m.topic.to_string(),
-                stream: None,
-                seq,
-                stamp_sec: sec,
-                stamp_nanosec: nsec,
-                frame_id: frame,
-                id: Some(spec.entry.id.to_string()),
-                severity: Some(spec.severity),
-                seed: Some(spec.seed),
-            };
-            let json = serde_json::to_string(&ev).expect("event serialises");
+            let json = event_json(spec, m.topic, header, seq);
             w.write(
                 events,
                 m.log_time,
@@ -107,7 +84,61 @@ pub fn perturb_bag(
         Ok(ControlFlow::Continue(()))
     })?;
     let dir = w.finish()?;
-    for (t, n) in &perturbed {
+    say_what_was_written(progress, spec, &perturbed, report.delivered, &dir);
+    if let Some(d) = report.damage {
+        return Err(StudyError::input(
+            bag.paths().first().copied().unwrap_or(out),
+            format!("the input bag is damaged; the messages before the damage were written: {d}"),
+        ));
+    }
+    Ok(report.delivered)
+}
+
+/// The output bag in the input's format (ROS 1 for a ROS 1 input), with a topic like each of
+/// the input's and the events topic: (writer, format, channel per topic, events channel).
+fn open_output(bag: &Bag, out: &Path) -> Result<(AnyWriter, BagFormat, HashMap<String, u16>, u16)> {
+    let topics_in = bag.topics()?;
+    let format = if bag.is_ros1_bag() || topics_in.iter().any(|t| t.message_encoding == "ros1") {
+        BagFormat::Ros1
+    } else {
+        BagFormat::Rosbag2
+    };
+    let mut w = AnyWriter::create(out, format, None)?;
+    let mut channel = HashMap::new();
+    for t in &topics_in {
+        let id = w.add_topic_like(t)?;
+        channel.insert(t.topic.clone(), id);
+    }
+    let events = w.add_topic(EVENTS_TOPIC, EVENTS_TYPE)?;
+    Ok((w, format, channel, events))
+}
+
+/// The `/perturb/events` record of a perturbed message of `topic` (its header and sequence
+/// number), as JSON.
+fn event_json(spec: Spec, topic: &str, (sec, nsec, frame): HeaderOut, seq: u64) -> String {
+    let ev = PerturbationEvent {
+        topic: topic.to_string(),
+        stream: None,
+        seq,
+        stamp_sec: sec,
+        stamp_nanosec: nsec,
+        frame_id: frame,
+        id: Some(spec.entry.id.to_string()),
+        severity: Some(spec.severity),
+        seed: Some(spec.seed),
+    };
+    serde_json::to_string(&ev).expect("event serialises")
+}
+
+/// Notes what was perturbed per topic and written where (a warning when nothing was).
+fn say_what_was_written(
+    progress: &dyn Progress,
+    spec: Spec,
+    perturbed: &HashMap<String, u64>,
+    delivered: u64,
+    dir: &Path,
+) {
+    for (t, n) in perturbed {
         progress.note(&format!(
             "{t}: {n} messages perturbed with {} severity {}",
             spec.entry.id, spec.severity
@@ -121,17 +152,9 @@ pub fn perturb_bag(
     }
     let n_events: u64 = perturbed.values().sum();
     progress.note(&format!(
-        "{} messages of the input and {n_events} /perturb/events records written to {}",
-        report.delivered,
+        "{delivered} messages of the input and {n_events} /perturb/events records written to {}",
         dir.display()
     ));
-    if let Some(d) = report.damage {
-        return Err(StudyError::input(
-            bag.paths().first().copied().unwrap_or(out),
-            format!("the input bag is damaged; the messages before the damage were written: {d}"),
-        ));
-    }
-    Ok(report.delivered)
 }
 
 type HeaderOut = (i32, u32, String);
