@@ -7,7 +7,7 @@
 //! perturbation, severity, seed and sequence number (= k), so each variant can be regenerated
 //! with `perturb apply`.
 
-use crate::batch::{Selection, select};
+use crate::batch::{Selection, Set, select};
 use crate::dataset::Dataset;
 use crate::error::{Result, StudyError};
 use crate::files::{Loaded, load, save_cloud, save_image, sensor_for};
@@ -15,8 +15,9 @@ use crate::progress::Progress;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber};
 use perturb_core::registry::Modality;
 use perturb_core::rng::Rng;
+use perturb_core::sensor_model::SensorModel;
 use rayon::prelude::*;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Salt of the draw of (perturbation, severity) per sample.
 const DRAW_SALT: u64 = 0xA11C_3E47;
@@ -98,56 +99,9 @@ pub fn run(a: &AugmentOptions, progress: &dyn Progress) -> Result<AugmentOutcome
         .map(|(k, rel)| -> Result<String> {
             let set =
                 sets[Rng::for_frame(a.seed, k as u64, DRAW_SALT).below(sets.len() as u64) as usize];
-            let input = root.join(rel);
-            let stem = rel.file_name().and_then(|n| n.to_str()).unwrap_or("sample");
-            let (base, ext) = match stem.find('.') {
-                Some(i) => (&stem[..i], &stem[i..]),
-                None => (stem, ""),
-            };
-            let variant =
-                rel.with_file_name(format!("{base}__{}_s{}{ext}", set.entry.id, set.severity));
-            let out = a.out.join(&variant);
-            if let Some(p) = out.parent() {
-                std::fs::create_dir_all(p).map_err(StudyError::io(p))?;
-            }
-            let perturbing = || format!("perturbing {}", input.display());
-            match load(&input)? {
-                Loaded::Image(img, kind) => {
-                    let o = CameraPerturber::new(set.entry.id, set.severity, a.seed)?
-                        .apply_owned(&img.view(), k as u64)
-                        .map_err(StudyError::perturb(perturbing()))?;
-                    save_image(&out, &o.view(), kind)?;
-                }
-                Loaded::Cloud(c, kind, meta) => {
-                    let mut p = LidarPerturber::new(
-                        set.entry.id,
-                        set.severity,
-                        a.seed,
-                        sensor.clone().unwrap_or_default(),
-                    )?;
-                    let o = p
-                        .apply_owned(&c.view(), k as u64, None)
-                        .map_err(StudyError::perturb(perturbing()))?;
-                    save_cloud(&out, &o.view(), kind, meta)?;
-                }
-            }
-            if !a.no_clean {
-                let clean = a.out.join(rel);
-                std::fs::copy(&input, &clean).map_err(|e| {
-                    StudyError::input(&input, format!("cannot copy to {}: {e}", clean.display()))
-                })?;
-            }
+            let row = augment_one(a, &root, rel, k as u64, set, sensor.as_ref())?;
             progress.inc(1);
-            Ok(format!(
-                "{},{},{},{},{},{},{}",
-                rel.display(),
-                variant.display(),
-                set.entry.id,
-                set.entry.name,
-                set.severity,
-                a.seed,
-                k
-            ))
+            Ok(row)
         })
         .collect::<Result<_>>()?;
     let path = a.out.join("augment_manifest.csv");
@@ -163,4 +117,64 @@ pub fn run(a: &AugmentOptions, progress: &dyn Progress) -> Result<AugmentOutcome
         variants: rows.len(),
         manifest: path,
     })
+}
+
+/// Writes sample `rel` (the `k`th) perturbed with `set` (and, unless `no_clean`, a clean copy)
+/// under the output folder; returns its manifest row.
+fn augment_one(
+    a: &AugmentOptions,
+    root: &Path,
+    rel: &Path,
+    k: u64,
+    set: Set,
+    sensor: Option<&SensorModel>,
+) -> Result<String> {
+    let input = root.join(rel);
+    let stem = rel.file_name().and_then(|n| n.to_str()).unwrap_or("sample");
+    let (base, ext) = match stem.find('.') {
+        Some(i) => (&stem[..i], &stem[i..]),
+        None => (stem, ""),
+    };
+    let variant = rel.with_file_name(format!("{base}__{}_s{}{ext}", set.entry.id, set.severity));
+    let out = a.out.join(&variant);
+    if let Some(p) = out.parent() {
+        std::fs::create_dir_all(p).map_err(StudyError::io(p))?;
+    }
+    let perturbing = || format!("perturbing {}", input.display());
+    match load(&input)? {
+        Loaded::Image(img, kind) => {
+            let o = CameraPerturber::new(set.entry.id, set.severity, a.seed)?
+                .apply_owned(&img.view(), k)
+                .map_err(StudyError::perturb(perturbing()))?;
+            save_image(&out, &o.view(), kind)?;
+        }
+        Loaded::Cloud(c, kind, meta) => {
+            let mut p = LidarPerturber::new(
+                set.entry.id,
+                set.severity,
+                a.seed,
+                sensor.cloned().unwrap_or_default(),
+            )?;
+            let o = p
+                .apply_owned(&c.view(), k, None)
+                .map_err(StudyError::perturb(perturbing()))?;
+            save_cloud(&out, &o.view(), kind, meta)?;
+        }
+    }
+    if !a.no_clean {
+        let clean = a.out.join(rel);
+        std::fs::copy(&input, &clean).map_err(|e| {
+            StudyError::input(&input, format!("cannot copy to {}: {e}", clean.display()))
+        })?;
+    }
+    Ok(format!(
+        "{},{},{},{},{},{},{}",
+        rel.display(),
+        variant.display(),
+        set.entry.id,
+        set.entry.name,
+        set.severity,
+        a.seed,
+        k
+    ))
 }
