@@ -79,27 +79,7 @@ pub fn sweep(
     let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
     for name in &streams {
-        let sub: FrameSubscriber = p.transport.subscriber(
-            &perturb_wire::names::perturbed(name),
-            &perturb_wire::StreamQos {
-                subscriber_buffer: 4,
-                ..Default::default()
-            },
-            None,
-        )?;
-        let (samples, stop) = (samples.clone(), stop.clone());
-        threads.push(std::thread::spawn(move || {
-            while !stop.load(Ordering::Relaxed) {
-                if let Ok(Some(f)) = sub.wait(Duration::from_millis(100)) {
-                    let h = f.header();
-                    let ms = h.t_daemon_tx_ns.saturating_sub(h.t_ingress_ns) as f64 / 1e6;
-                    let key = h.applied().map(|a| (a.id, a.severity));
-                    if let Ok(mut s) = samples.lock() {
-                        s.entry(key).or_default().push(ms);
-                    }
-                }
-            }
-        }));
+        threads.push(collect_latencies(&p, name, &samples, &stop)?);
     }
     let settle = Duration::from_millis(500);
     let run = Duration::from_secs_f64(window.max(0.1));
@@ -143,8 +123,48 @@ pub fn sweep(
     }
     p.stop()?;
     let _ = std::fs::remove_dir_all(&out);
-    let mut samples =
-        std::mem::take(&mut *samples.lock().map_err(|_| anyhow::anyhow!("poisoned"))?);
+    let samples = std::mem::take(&mut *samples.lock().map_err(|_| anyhow::anyhow!("poisoned"))?);
+    result(samples, &keys, dropped)
+}
+
+/// A thread that records, per active perturbation (None: off), the ingress-to-daemon-publish
+/// latency of every perturbed frame of stream `name` until `stop`.
+fn collect_latencies(
+    p: &Pipeline,
+    name: &str,
+    samples: &Samples,
+    stop: &Arc<AtomicBool>,
+) -> Result<std::thread::JoinHandle<()>> {
+    let sub: FrameSubscriber = p.transport.subscriber(
+        &perturb_wire::names::perturbed(name),
+        &perturb_wire::StreamQos {
+            subscriber_buffer: 4,
+            ..Default::default()
+        },
+        None,
+    )?;
+    let (samples, stop) = (samples.clone(), stop.clone());
+    Ok(std::thread::spawn(move || {
+        while !stop.load(Ordering::Relaxed) {
+            if let Ok(Some(f)) = sub.wait(Duration::from_millis(100)) {
+                let h = f.header();
+                let ms = h.t_daemon_tx_ns.saturating_sub(h.t_ingress_ns) as f64 / 1e6;
+                let key = h.applied().map(|a| (a.id, a.severity));
+                if let Ok(mut s) = samples.lock() {
+                    s.entry(key).or_default().push(ms);
+                }
+            }
+        }
+    }))
+}
+
+/// The sweep's rows (one per perturbation and severity in `keys`) and the overhead with every
+/// perturbation off, from the latencies collected.
+fn result(
+    mut samples: HashMap<Option<(String, u8)>, Vec<f64>>,
+    keys: &[(&'static Entry, u8)],
+    dropped: Vec<u64>,
+) -> Result<HilResult> {
     let off = samples.remove(&None).unwrap_or_default();
     if off.is_empty() {
         bail!("no frame came through the daemon with the perturbation off: is the bag replaying?");
