@@ -184,8 +184,7 @@ pub fn run(a: Args) -> Result<()> {
         Some(p) => p.clone(),
         None => default_input(a.modality)?,
     };
-    let mut rows: Vec<Timing> = Vec::new();
-    let mut fits: Vec<Option<Fit>> = Vec::new();
+    let (rows, fits): (Vec<Timing>, Vec<Option<Fit>>);
     match (a.modality, load(&input)?) {
         (Modality::Camera, Loaded::Image(img, _)) => {
             let frame = if (img.width, img.height) == (a.width, a.height) {
@@ -200,22 +199,10 @@ pub fn run(a: Args) -> Result<()> {
                 a.height,
                 a.threads
             );
-            for e in of_modality(Modality::Camera).filter(|e| selected(e.id)) {
-                for s in e.severities() {
-                    let t = pool
-                        .install(|| time_camera(e, s, 1, &frame.view(), a.frames))
-                        .with_context(|| format!("{} severity {s}", e.id))?;
-                    let fit = a.fit_threads.then(|| {
-                        threads_to_fit(&t, a.threads, budget, |pool| {
-                            pool.install(|| time_camera(e, s, 1, &frame.view(), a.frames))
-                        })
-                    });
-                    rows.push(t);
-                    if let Some(f) = fit {
-                        fits.push(f?);
-                    }
-                }
-            }
+            let entries = of_modality(Modality::Camera).filter(|e| selected(e.id));
+            (rows, fits) = time_all(entries, &a, budget, &pool, |e, s, pool| {
+                pool.install(|| time_camera(e, s, 1, &frame.view(), a.frames))
+            })?;
         }
         (Modality::Lidar, Loaded::Cloud(cloud, kind, _)) => {
             let sensor = sensor_for(
@@ -231,22 +218,10 @@ pub fn run(a: Args) -> Result<()> {
                 cloud.len(),
                 a.threads
             );
-            for e in of_modality(Modality::Lidar).filter(|e| selected(e.id)) {
-                for s in e.severities() {
-                    let t = pool
-                        .install(|| time_lidar(e, s, 1, &sensor, &cloud.view(), a.frames))
-                        .with_context(|| format!("{} severity {s}", e.id))?;
-                    let fit = a.fit_threads.then(|| {
-                        threads_to_fit(&t, a.threads, budget, |pool| {
-                            pool.install(|| time_lidar(e, s, 1, &sensor, &cloud.view(), a.frames))
-                        })
-                    });
-                    rows.push(t);
-                    if let Some(f) = fit {
-                        fits.push(f?);
-                    }
-                }
-            }
+            let entries = of_modality(Modality::Lidar).filter(|e| selected(e.id));
+            (rows, fits) = time_all(entries, &a, budget, &pool, |e, s, pool| {
+                pool.install(|| time_lidar(e, s, 1, &sensor, &cloud.view(), a.frames))
+            })?;
         }
         (m, _) => bail!(
             "{} is not {} input",
@@ -259,6 +234,34 @@ pub fn run(a: Args) -> Result<()> {
         ),
     }
     print_report(&rows, budget, format, None, &fits)
+}
+
+/// Times every severity of `entries` on `pool` with `time`, and with `--fit-threads` the threads
+/// each needs to fit `budget` (one entry per row then, none otherwise).
+fn time_all<'e>(
+    entries: impl Iterator<Item = &'e perturb_core::registry::Entry>,
+    a: &Args,
+    budget: f64,
+    pool: &rayon::ThreadPool,
+    time: impl Fn(
+        &'e perturb_core::registry::Entry,
+        u8,
+        &rayon::ThreadPool,
+    ) -> perturb_core::Result<Timing>,
+) -> Result<(Vec<Timing>, Vec<Option<Fit>>)> {
+    let (mut rows, mut fits) = (Vec::new(), Vec::new());
+    for e in entries {
+        for s in e.severities() {
+            let t = time(e, s, pool).with_context(|| format!("{} severity {s}", e.id))?;
+            if a.fit_threads {
+                fits.push(threads_to_fit(&t, a.threads, budget, |pool| {
+                    time(e, s, pool)
+                })?);
+            }
+            rows.push(t);
+        }
+    }
+    Ok((rows, fits))
 }
 
 /// The threads `t` (measured with `base` threads) needs for its median frame to fit `budget`:
