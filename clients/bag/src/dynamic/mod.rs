@@ -303,31 +303,12 @@ impl MessageCodec {
                     }
                     match &ty.base {
                         BaseType::Message(m) => {
-                            let def = &self.schema.types[m];
-                            let Some(idx) = def.fields.iter().position(|f| f.name == name) else {
-                                return Err(DynError::UnknownField {
-                                    path: path.to_string(),
-                                    field: name.to_string(),
-                                    type_name: m.clone(),
-                                    available: def.fields.iter().map(|f| f.name.clone()).collect(),
-                                });
-                            };
+                            let idx = self.field_index(path, m, name)?;
                             steps.push(Step::Field(idx));
-                            ty = def.fields[idx].ty.clone();
+                            ty = self.schema.types[m].fields[idx].ty.clone();
                         }
                         BaseType::Primitive(p @ (Primitive::Time | Primitive::Duration)) => {
-                            let part = match name {
-                                "secs" | "sec" => 0,
-                                "nsecs" | "nanosec" | "nsec" => 1,
-                                _ => {
-                                    return Err(DynError::UnknownField {
-                                        path: path.to_string(),
-                                        field: name.to_string(),
-                                        type_name: p.name().to_string(),
-                                        available: vec!["secs".into(), "nsecs".into()],
-                                    });
-                                }
-                            };
+                            let (part, leaf) = time_part(path, *p, name)?;
                             if k + 1 != segs.len() {
                                 return Err(bad(format!(
                                     "`{name}` of a {} is a number, nothing is inside it",
@@ -335,15 +316,6 @@ impl MessageCodec {
                                 )));
                             }
                             steps.push(Step::TimePart(part));
-                            let leaf = FieldType {
-                                base: BaseType::Primitive(if *p == Primitive::Time {
-                                    Primitive::UInt32
-                                } else {
-                                    Primitive::Int32
-                                }),
-                                array: ArrayKind::Single,
-                                string_bound: None,
-                            };
                             return Ok(FieldPath {
                                 text: path.to_string(),
                                 steps,
@@ -382,6 +354,20 @@ impl MessageCodec {
             steps,
             leaf: ty,
         })
+    }
+
+    /// The index of field `name` of message type `m`, or an error listing the fields it has.
+    fn field_index(&self, path: &str, m: &str, name: &str) -> Result<usize, DynError> {
+        let def = &self.schema.types[m];
+        def.fields
+            .iter()
+            .position(|f| f.name == name)
+            .ok_or_else(|| DynError::UnknownField {
+                path: path.to_string(),
+                field: name.to_string(),
+                type_name: m.to_string(),
+                available: def.fields.iter().map(|f| f.name.clone()).collect(),
+            })
     }
 
     /// Reads the value at `path` from a message, decoding only what lies on the way.
@@ -453,3 +439,30 @@ impl MessageCodec {
 
 #[cfg(test)]
 mod tests;
+
+/// Part `name` of a ROS time or duration `p` (`secs` or `nsecs`, ROS 2's `sec`/`nanosec` too): its
+/// index and its type (u32 for a time, i32 for a duration).
+fn time_part(path: &str, p: Primitive, name: &str) -> Result<(usize, FieldType), DynError> {
+    let part = match name {
+        "secs" | "sec" => 0,
+        "nsecs" | "nanosec" | "nsec" => 1,
+        _ => {
+            return Err(DynError::UnknownField {
+                path: path.to_string(),
+                field: name.to_string(),
+                type_name: p.name().to_string(),
+                available: vec!["secs".into(), "nsecs".into()],
+            });
+        }
+    };
+    let leaf = FieldType {
+        base: BaseType::Primitive(if p == Primitive::Time {
+            Primitive::UInt32
+        } else {
+            Primitive::Int32
+        }),
+        array: ArrayKind::Single,
+        string_bound: None,
+    };
+    Ok((part, leaf))
+}
