@@ -540,16 +540,7 @@ where
     let map: &[u8] = &file.map;
     let file_len = map.len() as u64;
     let mut channels = mcap::read::ChannelAccumulator::default();
-    /// What one record did to the scan.
-    enum Step {
-        Go,
-        Stop,
-        End,
-    }
-    let mut handle = |opcode: u8,
-                      data: &[u8],
-                      near: u64|
-     -> Result<Step, Result<String, BagError>> {
+    let mut handle = |opcode: u8, data: &[u8], near: u64| -> Result<Step, ScanError> {
         let record = guard::check_mcap_record(opcode, data, near, file_len)
             .and_then(|()| {
                 mcap::read::parse_record(opcode, data)
@@ -586,88 +577,7 @@ where
     // unpacked by `chunk_records` and its records walked the same way.
     let mut pos = 8usize;
     while pos < map.len() && !ended {
-        let rest = &map[pos..];
-        let at = pos as u64;
-        let steps: Result<Vec<Step>, Result<String, BagError>> = if rest.len() < 9 {
-            Err(Ok(format!(
-                "the file ends inside the record header at byte {at}: truncated"
-            )))
-        } else {
-            let opcode = rest[0];
-            let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
-            let avail = (rest.len() - 9) as u64;
-            if len > avail {
-                // A truncated record. From an uncompressed chunk, the whole records before the
-                // cut are still delivered.
-                let mut v = Vec::new();
-                let mut why = format!(
-                    "record 0x{opcode:02x} at byte {at} claims {len} bytes but only {avail} remain: truncated"
-                );
-                if opcode == 0x06 && rest.len() >= 9 + 32 {
-                    let clen =
-                        u32::from_le_bytes(rest[37..41].try_into().expect("4 bytes")) as usize;
-                    let start = 9 + 32 + clen + 8;
-                    if clen == 0 && rest.len() >= start {
-                        let (recs, _) = guard::mcap_records_salvage(&rest[start..], at, file_len);
-                        for (op, body, _) in recs {
-                            match handle(op, body, at) {
-                                Ok(st) => {
-                                    let stop = !matches!(st, Step::Go);
-                                    v.push(st);
-                                    if stop {
-                                        break;
-                                    }
-                                }
-                                Err(e) => {
-                                    if let Ok(d) = e {
-                                        why = d;
-                                    } else {
-                                        return Err(e.expect_err("an error"));
-                                    }
-                                    break;
-                                }
-                            }
-                        }
-                    }
-                }
-                if v.iter().any(|s| matches!(s, Step::Stop)) {
-                    return Ok((ControlFlow::Break(()), None));
-                }
-                Err(Ok(why))
-            } else {
-                let body = &rest[9..9 + len as usize];
-                pos += 9 + len as usize;
-                if opcode == 0x06 {
-                    guard::check_mcap_record(0x06, body, at, file_len)
-                        .and_then(|()| chunk_records(body, at, file_len))
-                        .and_then(|inner| {
-                            let recs = guard::mcap_records(&inner, 0, file_len).map_err(|e| {
-                                format!("in the chunk at byte {at} (offset within it): {e}")
-                            })?;
-                            Ok(recs
-                                .iter()
-                                .map(|&(op, body, _)| (op, body.to_vec()))
-                                .collect::<Vec<_>>())
-                        })
-                        .map_err(Ok)
-                        .and_then(|recs| {
-                            let mut v = Vec::new();
-                            for (op, body) in recs {
-                                let st = handle(op, &body, at)?;
-                                let stop = !matches!(st, Step::Go);
-                                v.push(st);
-                                if stop {
-                                    break;
-                                }
-                            }
-                            Ok(v)
-                        })
-                } else {
-                    handle(opcode, body, at).map(|s| vec![s])
-                }
-            }
-        };
-        match steps {
+        match next_records(map, &mut pos, &mut handle) {
             Ok(v) => {
                 if v.iter().any(|s| matches!(s, Step::Stop)) {
                     return Ok((ControlFlow::Break(()), None));
@@ -684,6 +594,113 @@ where
         format!("the file ends at byte {file_len} without its Data End record and footer: truncated (a recording that was cut short?)")
     });
     Ok((ControlFlow::Continue(()), damage))
+}
+
+/// What one record did to a linear scan.
+enum Step {
+    Go,
+    Stop,
+    End,
+}
+
+/// Why a linear scan ends early: damage (`Ok`, described; the records before it were delivered)
+/// or the caller's error (`Err`).
+type ScanError = Result<String, BagError>;
+
+/// A record handler of [`scan_linear`]: (opcode, body, the byte it is near).
+type Handle<'h> = dyn FnMut(u8, &[u8], u64) -> Result<Step, ScanError> + 'h;
+
+/// Walks the top-level record at `*pos` of `map` (moving `pos` past it): a chunk's records, or the
+/// record itself. A record cut by the end of the file is damage, after the whole records of an
+/// uncompressed chunk before the cut.
+fn next_records(
+    map: &[u8],
+    pos: &mut usize,
+    handle: &mut Handle<'_>,
+) -> Result<Vec<Step>, ScanError> {
+    let file_len = map.len() as u64;
+    let rest = &map[*pos..];
+    let at = *pos as u64;
+    if rest.len() < 9 {
+        return Err(Ok(format!(
+            "the file ends inside the record header at byte {at}: truncated"
+        )));
+    }
+    let opcode = rest[0];
+    let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
+    let avail = (rest.len() - 9) as u64;
+    if len > avail {
+        return truncated_record(rest, at, file_len, (opcode, len, avail), handle);
+    }
+    let body = &rest[9..9 + len as usize];
+    *pos += 9 + len as usize;
+    if opcode != 0x06 {
+        return handle(opcode, body, at).map(|s| vec![s]);
+    }
+    let recs = guard::check_mcap_record(0x06, body, at, file_len)
+        .and_then(|()| chunk_records(body, at, file_len))
+        .and_then(|inner| {
+            let recs = guard::mcap_records(&inner, 0, file_len)
+                .map_err(|e| format!("in the chunk at byte {at} (offset within it): {e}"))?;
+            Ok(recs
+                .iter()
+                .map(|&(op, body, _)| (op, body.to_vec()))
+                .collect::<Vec<_>>())
+        })
+        .map_err(Ok)?;
+    let mut v = Vec::new();
+    for (op, body) in recs {
+        let st = handle(op, &body, at)?;
+        let stop = !matches!(st, Step::Go);
+        v.push(st);
+        if stop {
+            break;
+        }
+    }
+    Ok(v)
+}
+
+/// A record that claims more bytes than remain. From an uncompressed chunk, the whole records
+/// before the cut are still delivered; the result is the damage unless one of them stopped the
+/// scan.
+fn truncated_record(
+    rest: &[u8],
+    at: u64,
+    file_len: u64,
+    (opcode, len, avail): (u8, u64, u64),
+    handle: &mut Handle<'_>,
+) -> Result<Vec<Step>, ScanError> {
+    let mut v = Vec::new();
+    let mut why = format!(
+        "record 0x{opcode:02x} at byte {at} claims {len} bytes but only {avail} remain: truncated"
+    );
+    if opcode == 0x06 && rest.len() >= 9 + 32 {
+        let clen = u32::from_le_bytes(rest[37..41].try_into().expect("4 bytes")) as usize;
+        let start = 9 + 32 + clen + 8;
+        if clen == 0 && rest.len() >= start {
+            let (recs, _) = guard::mcap_records_salvage(&rest[start..], at, file_len);
+            for (op, body, _) in recs {
+                match handle(op, body, at) {
+                    Ok(st) => {
+                        let stop = !matches!(st, Step::Go);
+                        v.push(st);
+                        if stop {
+                            break;
+                        }
+                    }
+                    Err(Ok(d)) => {
+                        why = d;
+                        break;
+                    }
+                    Err(Err(e)) => return Err(Err(e)),
+                }
+            }
+        }
+    }
+    if v.iter().any(|s| matches!(s, Step::Stop)) {
+        return Ok(v);
+    }
+    Err(Ok(why))
 }
 
 fn read_linear<F>(
