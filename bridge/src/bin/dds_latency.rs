@@ -16,11 +16,13 @@
 //! Both participants use only the loopback interface unless `--interface` says otherwise
 //! (`--interface default` leaves the choice to the DDS implementation).
 
+mod common;
+
 use perturb_bridge::dds::{self, BackendKind, Qos, Received, Reliability, RosType, TopicSpec};
-use perturb_bridge::frame::{OwnedPayload, monotonic_ns};
+use perturb_bridge::frame::monotonic_ns;
 use perturb_bridge::stats::summarize;
-use std::io::{BufRead, BufReader, Write};
-use std::process::{Command, Stdio};
+use std::io::Write;
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 struct Args {
@@ -147,62 +149,16 @@ fn reader(a: &Args) -> Result<(), String> {
 }
 
 fn writer(a: &Args) -> Result<(), String> {
-    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
-    let mut child_args: Vec<String> = std::env::args().skip(1).collect();
-    child_args.push("--role-reader".into());
-    let mut child = Command::new(exe)
-        .args(&child_args)
-        .stdout(Stdio::piped())
-        .spawn()
-        .map_err(|e| e.to_string())?;
-    let stdout = child.stdout.take().ok_or("no child stdout")?;
-    let (tx, rx) = crossbeam::channel::unbounded::<String>();
-    std::thread::spawn(move || {
-        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = tx.send(l);
-        }
-    });
-    rx.recv_timeout(Duration::from_secs(30))
-        .map_err(|_| "reader did not start")?;
+    let (mut child, rx) = spawn_reader()?;
     let backend =
         dds::backend(&participant(a, a.writer), "latency_writer").map_err(|e| e.to_string())?;
     let mut w = backend.writer(&spec(a)).map_err(|e| e.to_string())?;
-    let mut frame = match (a.image, a.cloud) {
-        (_, Some(n)) => {
-            let mut c = perturb_core::synthetic::vlp32c_scan(0);
-            // Repeat the scan's points up to n.
-            let step = c.layout.point_step as usize;
-            let src = c.data.clone();
-            c.data = (0..n * step).map(|i| src[i % src.len()]).collect();
-            OwnedPayload::Cloud {
-                sec: 0,
-                nanosec: 0,
-                frame_id: "warmup".into(),
-                cloud: perturb_core::cloud::Cloud::from_vec(
-                    c.layout.clone(),
-                    c.data,
-                    n as u32,
-                    1,
-                    n * step,
-                    true,
-                )
-                .map_err(|e| e.to_string())?,
-            }
-        }
-        (Some((wd, ht)), None) => OwnedPayload::Image {
-            sec: 0,
-            nanosec: 0,
-            frame_id: "warmup".into(),
-            image: perturb_core::synthetic::street_image(wd, ht, 0),
-        },
-        _ => unreachable!(),
-    };
+    let mut frame = common::test_frame(a.image, a.cloud, "warmup")?;
     let bytes = frame.payload().encode().len();
     // Discovery: send warm-up frames until the reader sees one.
     let t = Instant::now();
     loop {
-        let now = monotonic_ns();
-        set_stamp(&mut frame, now, "warmup");
+        common::set_stamp(&mut frame, monotonic_ns(), Some("warmup"));
         w.write(&frame.payload()).map_err(|e| e.to_string())?;
         if let Ok(l) = rx.recv_timeout(Duration::from_millis(300))
             && l.starts_with("warmup")
@@ -225,22 +181,11 @@ fn writer(a: &Args) -> Result<(), String> {
             std::thread::sleep(d);
         }
         let t0 = monotonic_ns();
-        set_stamp(&mut frame, t0, "m");
+        common::set_stamp(&mut frame, t0, Some("m"));
         w.write(&frame.payload()).map_err(|e| e.to_string())?;
         write_ns.push(monotonic_ns() - t0);
     }
-    let mut lat = Vec::new();
-    let end = Instant::now() + Duration::from_secs(3);
-    while lat.len() < a.count {
-        match rx.recv_deadline(end) {
-            Ok(l) => {
-                if let Some(v) = l.strip_prefix("m ").and_then(|v| v.parse::<u64>().ok()) {
-                    lat.push(v);
-                }
-            }
-            Err(_) => break,
-        }
-    }
+    let lat = latencies(&rx, a.count);
     let _ = child.kill();
     let _ = child.wait();
     let s = summarize(&lat);
@@ -260,27 +205,38 @@ fn writer(a: &Args) -> Result<(), String> {
     Ok(())
 }
 
-fn set_stamp(p: &mut OwnedPayload, ns: u64, id: &str) {
-    let (s, n) = ((ns / 1_000_000_000) as i32, (ns % 1_000_000_000) as u32);
-    match p {
-        OwnedPayload::Image {
-            sec,
-            nanosec,
-            frame_id,
-            ..
+/// This program again as the reader (a second process), once it says it has started; its
+/// printed lines arrive on the receiver.
+fn spawn_reader() -> Result<(Child, crossbeam::channel::Receiver<String>), String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let mut child_args: Vec<String> = std::env::args().skip(1).collect();
+    child_args.push("--role-reader".into());
+    let mut child = Command::new(exe)
+        .args(&child_args)
+        .stdout(Stdio::piped())
+        .spawn()
+        .map_err(|e| e.to_string())?;
+    let rx = common::lines_of(child.stdout.take().ok_or("no child stdout")?);
+    rx.recv_timeout(Duration::from_secs(30))
+        .map_err(|_| "reader did not start")?;
+    Ok((child, rx))
+}
+
+/// The latencies (ns) the reader reported for the measured frames, waiting up to 3 s for them.
+fn latencies(rx: &crossbeam::channel::Receiver<String>, count: usize) -> Vec<u64> {
+    let mut lat = Vec::new();
+    let end = Instant::now() + Duration::from_secs(3);
+    while lat.len() < count {
+        match rx.recv_deadline(end) {
+            Ok(l) => {
+                if let Some(v) = l.strip_prefix("m ").and_then(|v| v.parse::<u64>().ok()) {
+                    lat.push(v);
+                }
+            }
+            Err(_) => break,
         }
-        | OwnedPayload::Cloud {
-            sec,
-            nanosec,
-            frame_id,
-            ..
-        } => {
-            *sec = s;
-            *nanosec = n;
-            *frame_id = id.to_string();
-        }
-        OwnedPayload::Copied { .. } => {}
     }
+    lat
 }
 
 fn main() {

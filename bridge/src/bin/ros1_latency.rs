@@ -14,12 +14,13 @@
 //! copy, the TCP loopback and the subscriber's read and deserialization: the egress hop of a
 //! frame that left the daemon.
 
+mod common;
+
 use perturb_bridge::dds::{Qos, Received, RosType, TopicSpec};
 use perturb_bridge::frame::{OwnedPayload, Payload, monotonic_ns};
 use perturb_bridge::ros1::{Node, Ros1Settings, TopicReader1};
 use perturb_bridge::stats::summarize;
 use perturb_bridge::topic::TopicReader;
-use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -139,44 +140,6 @@ fn start_master(home: &std::path::Path) -> Result<(Child, String), String> {
     Ok((child, format!("http://127.0.0.1:{port}/")))
 }
 
-fn frame(a: &Args) -> Result<OwnedPayload, String> {
-    Ok(match (a.image, a.cloud) {
-        (_, Some(n)) => {
-            let c = perturb_core::synthetic::vlp32c_scan(0);
-            let step = c.layout.point_step as usize;
-            let data: Vec<u8> = (0..n * step).map(|i| c.data[i % c.data.len()]).collect();
-            OwnedPayload::Cloud {
-                sec: 0,
-                nanosec: 0,
-                frame_id: "lidar".into(),
-                cloud: perturb_core::cloud::Cloud::from_vec(
-                    c.layout.clone(),
-                    data,
-                    n as u32,
-                    1,
-                    n * step,
-                    true,
-                )
-                .map_err(|e| e.to_string())?,
-            }
-        }
-        (Some((w, h)), None) => OwnedPayload::Image {
-            sec: 0,
-            nanosec: 0,
-            frame_id: "camera".into(),
-            image: perturb_core::synthetic::street_image(w, h, 0),
-        },
-        _ => unreachable!(),
-    })
-}
-
-fn set_stamp(p: &mut OwnedPayload, ns: u64) {
-    if let OwnedPayload::Image { sec, nanosec, .. } | OwnedPayload::Cloud { sec, nanosec, .. } = p {
-        *sec = (ns / 1_000_000_000) as i32;
-        *nanosec = (ns % 1_000_000_000) as u32;
-    }
-}
-
 fn writer(a: &Args) -> Result<(), String> {
     let home = std::env::temp_dir().join(format!("perturb-ros1-latency-{}", std::process::id()));
     std::fs::create_dir_all(&home).map_err(|e| e.to_string())?;
@@ -185,54 +148,8 @@ fn writer(a: &Args) -> Result<(), String> {
     let node = Node::start(&settings).map_err(|e| e.to_string())?;
     let ty = perturb_bridge::ros1::msg_type(ros_type(a));
     let mut publisher = node.advertise(TOPIC, ty).map_err(|e| e.to_string())?;
-    let kind = if a.cloud.is_some() { "cloud" } else { "image" };
-    let mut child = match a.subscriber.as_str() {
-        "rospy" => {
-            Command::new(std::env::var("PERTURB_ROS_PYTHON").unwrap_or("/usr/bin/python3".into()))
-                .arg(concat!(
-                    env!("CARGO_MANIFEST_DIR"),
-                    "/../tests/tests/ros1_peer.py"
-                ))
-                .args([
-                    "sub",
-                    "--topic",
-                    TOPIC,
-                    "--type",
-                    kind,
-                    "--count",
-                    &(a.count + 1000).to_string(),
-                ])
-                .args(["--timeout", "600", "--no-hash"])
-                .env("ROS_MASTER_URI", &uri)
-                .env("ROS_HOSTNAME", "127.0.0.1")
-                .env("ROS_HOME", &home)
-                .stdout(Stdio::piped())
-                .stderr(Stdio::inherit())
-                .spawn()
-                .map_err(|e| e.to_string())?
-        }
-        "bridge" => Command::new(std::env::current_exe().map_err(|e| e.to_string())?)
-            .args(["--role-reader", "--master", &uri])
-            .args(if a.cloud.is_some() {
-                ["--cloud", "1"]
-            } else {
-                ["--image", "1x1"]
-            })
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .map_err(|e| e.to_string())?,
-        o => return Err(format!("--subscriber {o}: rospy or bridge")),
-    };
-    let (tx, rx) = std::sync::mpsc::channel::<String>();
-    let out = child.stdout.take().ok_or("no stdout")?;
-    std::thread::spawn(move || {
-        for line in BufReader::new(out).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
+    let mut child = spawn_subscriber(a, &uri, &home)?;
+    let rx = common::lines_of(child.stdout.take().ok_or("no stdout")?);
     let t = Instant::now();
     while publisher.subscribers() == 0 {
         if t.elapsed() > Duration::from_secs(30) {
@@ -241,18 +158,10 @@ fn writer(a: &Args) -> Result<(), String> {
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    let mut frame = frame(a)?;
+    let frame_id = if a.cloud.is_some() { "lidar" } else { "camera" };
+    let mut frame = common::test_frame(a.image, a.cloud, frame_id)?;
     let bytes = frame.payload().data().len();
     // Warm-up: 10 frames, not counted.
-    let publish = |p: &mut perturb_bridge::ros1::Publisher, f: &mut OwnedPayload| {
-        set_stamp(f, monotonic_ns());
-        let payload = f.payload();
-        let parts = match &payload {
-            Payload::Image(m) => m.ros1_parts(0),
-            Payload::Cloud(m) => m.ros1_parts(0),
-        };
-        p.publish(&[&parts.head, parts.data, &parts.tail]);
-    };
     for _ in 0..10 {
         publish(&mut publisher, &mut frame);
         std::thread::sleep(Duration::from_millis(100));
@@ -272,9 +181,95 @@ fn writer(a: &Args) -> Result<(), String> {
         sent.push(monotonic_ns() - t0);
     }
     std::thread::sleep(Duration::from_secs(2));
+    let lat = latencies(&rx, a.subscriber == "rospy");
+    let _ = child.kill();
+    let _ = child.wait();
+    drop(publisher);
+    drop(node);
+    let _ = master.kill();
+    let _ = master.wait();
+    let _ = std::fs::remove_dir_all(&home);
+    let s = summarize(&lat);
+    let p = summarize(&sent);
+    let what = match (a.image, a.cloud) {
+        (_, Some(n)) => format!("{n}-point cloud"),
+        (Some((w, h)), None) => format!("{w}x{h} rgb8"),
+        (None, None) => "frame".into(),
+    };
+    println!(
+        "bridge -> {} | {what} ({:.1} MB) | {} of {} received | p50 {:.2} ms | p99 {:.2} ms | max {:.2} ms | publish call p50 {:.2} ms",
+        a.subscriber,
+        bytes as f64 / 1e6,
+        lat.len(),
+        a.count,
+        s.p50_ms,
+        s.p99_ms,
+        s.max_ms,
+        p.p50_ms
+    );
+    Ok(())
+}
+
+/// Stamps `f` with the time now and publishes it (its header and tail around its data).
+fn publish(p: &mut perturb_bridge::ros1::Publisher, f: &mut OwnedPayload) {
+    common::set_stamp(f, monotonic_ns(), None);
+    let payload = f.payload();
+    let parts = match &payload {
+        Payload::Image(m) => m.ros1_parts(0),
+        Payload::Cloud(m) => m.ros1_parts(0),
+    };
+    p.publish(&[&parts.head, parts.data, &parts.tail]);
+}
+
+/// The subscriber measured: rospy (`tests/tests/ros1_peer.py`) or this program as the reader.
+fn spawn_subscriber(a: &Args, uri: &str, home: &std::path::Path) -> Result<Child, String> {
+    let kind = if a.cloud.is_some() { "cloud" } else { "image" };
+    match a.subscriber.as_str() {
+        "rospy" => {
+            Command::new(std::env::var("PERTURB_ROS_PYTHON").unwrap_or("/usr/bin/python3".into()))
+                .arg(concat!(
+                    env!("CARGO_MANIFEST_DIR"),
+                    "/../tests/tests/ros1_peer.py"
+                ))
+                .args([
+                    "sub",
+                    "--topic",
+                    TOPIC,
+                    "--type",
+                    kind,
+                    "--count",
+                    &(a.count + 1000).to_string(),
+                ])
+                .args(["--timeout", "600", "--no-hash"])
+                .env("ROS_MASTER_URI", uri)
+                .env("ROS_HOSTNAME", "127.0.0.1")
+                .env("ROS_HOME", home)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::inherit())
+                .spawn()
+                .map_err(|e| e.to_string())
+        }
+        "bridge" => Command::new(std::env::current_exe().map_err(|e| e.to_string())?)
+            .args(["--role-reader", "--master", uri])
+            .args(if a.cloud.is_some() {
+                ["--cloud", "1"]
+            } else {
+                ["--image", "1x1"]
+            })
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| e.to_string()),
+        o => Err(format!("--subscriber {o}: rospy or bridge")),
+    }
+}
+
+/// The latencies (ns) the subscriber printed: rospy's JSON lines (arrival time and stamp), or
+/// the reader's `arrival stamp` lines.
+fn latencies(rx: &crossbeam::channel::Receiver<String>, rospy: bool) -> Vec<u64> {
     let mut lat = Vec::new();
     while let Ok(l) = rx.try_recv() {
-        if a.subscriber == "rospy" {
+        if rospy {
             let v: serde_json::Value = match serde_json::from_str(&l) {
                 Ok(v) => v,
                 Err(_) => continue,
@@ -292,32 +287,7 @@ fn writer(a: &Args) -> Result<(), String> {
             lat.push(t.saturating_sub(s));
         }
     }
-    let _ = child.kill();
-    let _ = child.wait();
-    drop(publisher);
-    drop(node);
-    let _ = master.kill();
-    let _ = master.wait();
-    let _ = std::fs::remove_dir_all(&home);
-    let s = summarize(&lat);
-    let p = summarize(&sent);
-    let what = match (a.image, a.cloud) {
-        (_, Some(n)) => format!("{n}-point cloud"),
-        (Some((w, h)), None) => format!("{w}x{h} rgb8"),
-        _ => unreachable!(),
-    };
-    println!(
-        "bridge -> {} | {what} ({:.1} MB) | {} of {} received | p50 {:.2} ms | p99 {:.2} ms | max {:.2} ms | publish call p50 {:.2} ms",
-        a.subscriber,
-        bytes as f64 / 1e6,
-        lat.len(),
-        a.count,
-        s.p50_ms,
-        s.p99_ms,
-        s.max_ms,
-        p.p50_ms
-    );
-    Ok(())
+    lat
 }
 
 fn main() {
