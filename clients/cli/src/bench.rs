@@ -474,9 +474,13 @@ fn print_table(rows: &[Timing], budget: f64, md: bool, live: Option<&Live>, fits
             );
         }
     }
+    // The project's one percentile definition (nearest rank), as every other report.
     let mut medians: Vec<f64> = rows.iter().map(|t| t.median_ms).collect();
-    medians.sort_by(f64::total_cmp);
-    let median = medians.get(medians.len() / 2).copied().unwrap_or(0.0);
+    let median = if medians.is_empty() {
+        0.0
+    } else {
+        perturb_core::percentile::of_f64(&mut medians, 0.5)
+    };
     println!(
         "{}{fits_all}/{} perturbations fit {budget} ms at every severity; median over all rows {median:.2} ms",
         if md { "\n" } else { "" },
