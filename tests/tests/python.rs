@@ -18,12 +18,21 @@ fn run(cmd: &mut Command, what: &str) {
     let out = cmd
         .output()
         .unwrap_or_else(|e| panic!("{what}: cannot start: {e}"));
-    assert!(
-        out.status.success(),
-        "{what} failed ({}):\n{}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
+    if out.status.success() {
+        return;
+    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // The cause first, on one line: a CI log excerpt may show only the panic's first lines.
+    let last = stderr
+        .lines()
+        .chain(stdout.lines())
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("(no output)");
+    panic!(
+        "{what} failed ({}): {last}\n--- stdout\n{stdout}\n--- stderr\n{stderr}",
+        out.status
     );
 }
 
