@@ -343,6 +343,12 @@ impl FieldReader {
         }
     }
 
+    /// True if the field is a little-endian f32 that lies within a point of `step` bytes: such a
+    /// field can be read and written as the four bytes at its offset.
+    pub fn is_le_f32_within(&self, step: usize) -> bool {
+        self.datatype == Datatype::Float32 && !self.big_endian && self.offset + 4 <= step
+    }
+
     /// Writes `v` (see [`FieldReader::write_f64`]).
     #[inline]
     pub fn write_f32(&self, point: &mut [u8], v: f32) {

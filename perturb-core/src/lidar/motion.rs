@@ -2,7 +2,7 @@
 
 use super::local::{BOXES, InBox, write_plan};
 use super::{LidarBuilder, LidarFrame, LidarPerturbation, Needs, Plan, Points};
-use crate::rng::Rng;
+use crate::rng::{Rng, for_each_normal_triple};
 
 /// L-F1 motion_blur: the motion scale s in metres, MultiCorrupt levels 1..3 (`pts_motion`).
 pub const MOTION_SCALE_M: [f64; 3] = [0.06, 0.10, 0.13];
@@ -29,15 +29,15 @@ impl LidarPerturbation for MotionBlur {
         let s = self.s;
         let t = [rng.normal() * s, rng.normal() * s, rng.normal() * s];
         let sd = [0.15 * s, 0.2 * s, 0.12 * s];
-        for i in 0..points.len() {
+        for_each_normal_triple(&mut rng, points.len(), |i, d| {
             let p = points.xyz(i);
             let mut q = [0f32; 3];
             for a in 0..3 {
-                let jitter = (rng.normal() * sd[a]).clamp(-3.0 * s, 3.0 * s);
+                let jitter = (d[a] * sd[a]).clamp(-3.0 * s, 3.0 * s);
                 q[a] = p[a] + (t[a] + jitter) as f32;
             }
             plan.moved(i, q);
-        }
+        });
     }
 }
 

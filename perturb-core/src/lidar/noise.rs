@@ -1,7 +1,7 @@
 //! Global noise family (L-C): jitter on every point's position.
 
 use super::{LidarBuilder, LidarFrame, LidarPerturbation, Plan, Points};
-use crate::rng::Rng;
+use crate::rng::{Rng, for_each_normal_triple};
 
 /// L-C1 gaussian_noise: standard deviation in metres, 3D-Corruptions-AD levels 1..5
 /// (`gaussian_noise`); severities 1, 2, 3 use levels 1, 3, 5.
@@ -29,11 +29,11 @@ impl LidarPerturbation for GaussianNoise {
     fn plan(&self, points: &Points, frame: &LidarFrame<'_>, plan: &mut Plan) {
         let mut rng = Rng::for_frame(self.seed, frame.seq, 0xC1);
         let s = self.sigma;
-        for i in 0..points.len() {
+        for_each_normal_triple(&mut rng, points.len(), |i, d| {
             let [x, y, z] = points.xyz(i);
-            let d = [rng.normal() * s, rng.normal() * s, rng.normal() * s];
+            let d = d.map(|v| v * s);
             plan.moved(i, [x + d[0] as f32, y + d[1] as f32, z + d[2] as f32]);
-        }
+        });
     }
 }
 

@@ -1,6 +1,6 @@
 //! Reading the fields a perturbation needs out of any layout, and writing the result back into it.
 
-use crate::cloud::{CloudView, Datatype, FieldReader, names};
+use crate::cloud::{CloudView, FieldReader, names};
 use crate::error::{Error, Result};
 use crate::sensor_model::{Axes, SensorModel};
 use rayon::prelude::*;
@@ -54,28 +54,37 @@ impl Points {
         let [rx, ry, rz] = layout.xyz_readers()?;
         let n = cloud.len();
         let step = layout.point_step as usize;
+        let ri = layout.reader_any(names::INTENSITY);
+        let mut intensity = ri.map(|_| self.intensity.take().unwrap_or_default());
+        let direct = |r: &FieldReader| r.is_le_f32_within(step) && cloud.is_contiguous();
         let read = |r: FieldReader, dst: &mut Vec<f32>| {
             dst.clear();
-            if r.datatype == Datatype::Float32
-                && !r.big_endian
-                && cloud.is_contiguous()
-                && r.offset + 4 <= step
-            {
-                // Little-endian f32 fields of points stored back to back (nearly every cloud):
-                // the same bytes read without a per-point type test or row arithmetic.
-                let o = r.offset;
-                dst.extend(
-                    cloud.data()[..n * step]
-                        .chunks_exact(step)
-                        .map(|p| f32::from_le_bytes([p[o], p[o + 1], p[o + 2], p[o + 3]])),
-                );
-            } else {
-                dst.extend((0..n).map(|i| r.read_f32(cloud.point(i))));
-            }
+            dst.extend((0..n).map(|i| r.read_f32(cloud.point(i))));
         };
-        read(rx, &mut self.x);
-        read(ry, &mut self.y);
-        read(rz, &mut self.z);
+        if [rx, ry, rz].iter().all(direct) {
+            // Little-endian f32 fields of points stored back to back (nearly every cloud): the
+            // fields read in one pass over the points, without a per-point type test or row
+            // arithmetic; the same values.
+            match (ri, intensity.as_mut()) {
+                (Some(ri), Some(v)) if direct(&ri) => {
+                    self.fill_direct(cloud, [rx, ry, rz], Some((ri, v)))
+                }
+                (ri, v) => {
+                    self.fill_direct(cloud, [rx, ry, rz], None);
+                    if let (Some(ri), Some(v)) = (ri, v) {
+                        read(ri, v);
+                    }
+                }
+            }
+        } else {
+            read(rx, &mut self.x);
+            read(ry, &mut self.y);
+            read(rz, &mut self.z);
+            if let (Some(ri), Some(v)) = (ri, intensity.as_mut()) {
+                read(ri, v);
+            }
+        }
+        self.intensity = intensity;
         self.axes = sensor.axes;
         if !self.axes.is_canonical() {
             for i in 0..n {
@@ -84,14 +93,6 @@ impl Points {
             }
         }
         self.intensity_max = sensor.intensity_max;
-        match layout.reader_any(names::INTENSITY) {
-            Some(ri) => {
-                let mut v = self.intensity.take().unwrap_or_default();
-                read(ri, &mut v);
-                self.intensity = Some(v);
-            }
-            None => self.intensity = None,
-        }
         self.ring_derived = false;
         self.ring = None;
         if want_ring {
@@ -117,6 +118,40 @@ impl Points {
             self.ring = Some(ring);
         }
         Ok(())
+    }
+
+    /// x, y, z and (when given) the intensity of a contiguous cloud whose fields are all
+    /// little-endian f32 ([`FieldReader::is_le_f32_within`]), read in one pass.
+    fn fill_direct(
+        &mut self,
+        cloud: &CloudView<'_>,
+        [rx, ry, rz]: [FieldReader; 3],
+        intensity: Option<(FieldReader, &mut Vec<f32>)>,
+    ) {
+        let n = cloud.len();
+        let step = cloud.layout().point_step as usize;
+        let points = cloud.data()[..n * step].chunks_exact(step);
+        for v in [&mut self.x, &mut self.y, &mut self.z] {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+        let (ox, oy, oz) = (rx.offset, ry.offset, rz.offset);
+        let xyz = self.x.iter_mut().zip(&mut self.y).zip(&mut self.z);
+        match intensity {
+            Some((ri, v)) => {
+                let oi = ri.offset;
+                v.clear();
+                v.resize(n, 0.0);
+                for ((((x, y), z), i), p) in xyz.zip(v.iter_mut()).zip(points) {
+                    (*x, *y, *z, *i) = (le_f32(p, ox), le_f32(p, oy), le_f32(p, oz), le_f32(p, oi));
+                }
+            }
+            None => {
+                for (((x, y), z), p) in xyz.zip(points) {
+                    (*x, *y, *z) = (le_f32(p, ox), le_f32(p, oy), le_f32(p, oz));
+                }
+            }
+        }
     }
 
     /// Number of points.
@@ -226,6 +261,12 @@ impl RingTable {
         let upper = (e[i] - deg).abs() < (deg - e[i - 1]).abs();
         (i - 1 + upper as usize) as u16
     }
+}
+
+/// The little-endian f32 at byte `o` of `p`.
+#[inline(always)]
+fn le_f32(p: &[u8], o: usize) -> f32 {
+    f32::from_le_bytes([p[o], p[o + 1], p[o + 2], p[o + 3]])
 }
 
 /// Flag: the output point has a new position.
@@ -344,6 +385,47 @@ impl Plan {
         self.len() * input.layout().point_step as usize
     }
 
+    /// [`Plan::write`]'s points for a contiguous input whose x, y, z (at `xyz`) and intensity (at
+    /// `intensity`) are little-endian f32: the same bytes, each field written as the four bytes at
+    /// its offset, without a per-point type test or row arithmetic.
+    fn write_direct(
+        &self,
+        input: &CloudView<'_>,
+        xyz: [usize; 3],
+        intensity: Option<usize>,
+        out: &mut [u8],
+    ) {
+        let step = input.layout().point_step as usize;
+        let data = input.data();
+        let put =
+            |dst: &mut [u8], o: usize, v: f32| dst[o..o + 4].copy_from_slice(&v.to_le_bytes());
+        out.par_chunks_mut(step * 1024)
+            .enumerate()
+            .for_each(|(block, chunk)| {
+                let k0 = block * 1024;
+                let n = chunk.len() / step;
+                let plan = self.src[k0..k0 + n]
+                    .iter()
+                    .zip(&self.flags[k0..k0 + n])
+                    .zip(&self.xyz[k0..k0 + n])
+                    .zip(&self.intensity[k0..k0 + n]);
+                for (dst, (((&src, &f), p), &v)) in chunk.chunks_exact_mut(step).zip(plan) {
+                    let s = src as usize * step;
+                    dst.copy_from_slice(&data[s..s + step]);
+                    if f & MOVED != 0 {
+                        put(dst, xyz[0], p[0]);
+                        put(dst, xyz[1], p[1]);
+                        put(dst, xyz[2], p[2]);
+                    }
+                    if f & NEW_INTENSITY != 0
+                        && let Some(o) = intensity
+                    {
+                        put(dst, o, v);
+                    }
+                }
+            });
+    }
+
     /// Writes the output cloud into `out` in `input`'s layout: each output point is a copy of its
     /// source point's bytes with x, y, z and the intensity field overwritten where flagged. An
     /// organised input (height > 1) keeps its height and width when the plan is one to one;
@@ -360,7 +442,19 @@ impl Plan {
         }
         let [rx, ry, rz] = layout.xyz_readers()?;
         let ri = layout.reader_any(names::INTENSITY);
-        if step > 0 {
+        let fields = [Some(rx), Some(ry), Some(rz), ri];
+        let direct =
+            input.is_contiguous() && fields.iter().flatten().all(|r| r.is_le_f32_within(step));
+        if step == 0 {
+            // No bytes to write (an empty plan, or a layout without bytes).
+        } else if direct {
+            self.write_direct(
+                input,
+                [rx.offset, ry.offset, rz.offset],
+                ri.map(|r| r.offset),
+                &mut out[..needed],
+            );
+        } else {
             out[..needed]
                 .par_chunks_mut(step * 1024)
                 .enumerate()
@@ -489,6 +583,69 @@ mod tests {
             0.05,
             "untouched fields pass through"
         );
+    }
+
+    /// The same points (LE f32 x, y, z, intensity and a u16 ring) stored back to back and as
+    /// two rows with padding: the direct paths (contiguous) against the per-field ones.
+    #[test]
+    fn direct_reads_and_writes_equal_the_per_field_ones() {
+        let layout = Arc::new(
+            PointLayout::new(
+                vec![
+                    PointField::new("ring", 0, Datatype::Uint16),
+                    PointField::new("z", 2, Datatype::Float32),
+                    PointField::new("x", 6, Datatype::Float32),
+                    PointField::new("intensity", 10, Datatype::Float32),
+                    PointField::new("y", 14, Datatype::Float32),
+                ],
+                18,
+                false,
+            )
+            .unwrap(),
+        );
+        let (w, step) = (37usize, 18usize);
+        let mut rng = crate::rng::Rng::from_key(17);
+        let packed: Vec<u8> = (0..2 * w * step).map(|_| rng.next_u32() as u8).collect();
+        let pad = 5;
+        let mut padded = Vec::new();
+        for row in packed.chunks_exact(w * step) {
+            padded.extend_from_slice(row);
+            padded.extend(std::iter::repeat_n(0xEE, pad));
+        }
+        let a = CloudView::new(layout.clone(), &packed, w as u32, 2, w * step, false).unwrap();
+        let b = CloudView::new(layout, &padded, w as u32, 2, w * step + pad, false).unwrap();
+        assert!(a.is_contiguous() && !b.is_contiguous());
+        let sensor = SensorModel::vlp32c();
+        let (pa, pb) = (
+            Points::extract(&a, &sensor, true).unwrap(),
+            Points::extract(&b, &sensor, true).unwrap(),
+        );
+        let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&pa.x), bits(&pb.x));
+        assert_eq!(bits(&pa.y), bits(&pb.y));
+        assert_eq!(bits(&pa.z), bits(&pb.z));
+        assert_eq!(
+            bits(pa.intensity.as_deref().unwrap()),
+            bits(pb.intensity.as_deref().unwrap())
+        );
+        assert_eq!(pa.ring, pb.ring);
+        let mut plan = Plan::default();
+        for i in 0..2 * w {
+            match i % 5 {
+                0 => plan.keep(i),
+                1 => plan.moved(i, [i as f32, -1.5, 2.25]),
+                2 => plan.dimmed(i, 0.125 * i as f32),
+                3 => plan.emit(2 * w - 1 - i, [0.5, i as f32, -3.0], 7.0),
+                _ => {}
+            }
+        }
+        let mut out_a = vec![0u8; plan.output_bytes(&a)];
+        let mut out_b = vec![1u8; plan.output_bytes(&b)];
+        assert_eq!(
+            plan.write(&a, &mut out_a).unwrap(),
+            plan.write(&b, &mut out_b).unwrap()
+        );
+        assert_eq!(out_a, out_b);
     }
 
     #[test]
