@@ -1,17 +1,30 @@
 //! HSV value scaling with exact rounding, per colour channel.
 
 use super::bytemap::ByteMap;
-use crate::camera::ops::{byte, copy_alpha, merge_rgb, par_rows_with, split_rgb_bytes, wide_fn};
+use crate::camera::ops::{copy_alpha, merge_rgb, par_rows_with, split_rgb_bytes, wide_fn};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
 
-/// The exact rounding `round(p nv / v)` (halves up) of a channel `p <= v` scaled by `nv / v`, in
-/// float: `k = nv / max(v, 1)` is within 2^-24 of the ratio, so `p k` is within 4e-5 of `p nv /
-/// v`, while every such fraction that is not a half is at least `1 / 510` from one. Adding 2^-12
-/// to the half pushes exact halves up and moves no other value across an integer. A black pixel
-/// (`v = 0`) takes `nv` on every channel (`z = 1`).
+/// `p nv / v` for a channel `p <= v` scaled by `nv / v`, plus `offset`, in float; [`nearest`]
+/// then gives its exact rounding `round(p nv / v)` with halves up. `k = nv / max(v, 1)` is within
+/// 2^-24 of the ratio, so `p k` is within 4e-5 of `p nv / v`, while every such fraction that is
+/// not a half is at least `1 / 510` from one. The offset [`NUDGE`] (2^-12) moves exact halves
+/// strictly above the half, so rounding to nearest takes them up, and moves no other value across
+/// a half. A black pixel (`v = 0`, every channel 0) takes `nv` on every channel: its offset is
+/// `nv + NUDGE` (exact in f32). A test checks every `(v, nv, p)` against exact integer arithmetic.
 #[inline(always)]
-fn scale_channel(p: f32, z: f32, k: f32) -> f32 {
-    (p + z) * k + (0.5 + 1.0 / 4096.0)
+fn scale_channel(p: f32, k: f32, offset: f32) -> f32 {
+    p * k + offset
+}
+
+/// What [`scale_channel`] adds to push exact halves up.
+const NUDGE: f32 = 1.0 / 4096.0;
+
+/// `x` in `[0, 255.5)` rounded to the nearest byte: adding 2^23 leaves no fraction in an f32's
+/// mantissa, so the low byte of the sum's bits is the rounded value. [`scale_channel`]'s values are
+/// never within 2^-13 of a half, so how ties round does not matter.
+#[inline(always)]
+fn nearest(x: f32) -> u8 {
+    (x + 8_388_608.0).to_bits() as u8
 }
 
 /// The HSV value of every pixel scaled by `f` and truncated, `V' = min(255, floor(V f))` (C-C4 and
@@ -47,11 +60,11 @@ wide_fn! {
             let v8 = (*r).max(*g).max(*b);
             let v = v8 as f32;
             let nv = (v * f).min(255.0).floor();
-            let z = if v8 == 0 { 1.0 } else { 0.0 };
             let k = nv / v.max(1.0);
-            *r = byte(scale_channel(*r as f32, z, k));
-            *g = byte(scale_channel(*g as f32, z, k));
-            *b = byte(scale_channel(*b as f32, z, k));
+            let offset = if v8 == 0 { nv + NUDGE } else { NUDGE };
+            *r = nearest(scale_channel(*r as f32, k, offset));
+            *g = nearest(scale_channel(*g as f32, k, offset));
+            *b = nearest(scale_channel(*b as f32, k, offset));
         }
         merge_rgb(format, [&*r, &*g, &*b], dst);
     }
@@ -60,7 +73,6 @@ wide_fn! {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::ops::byte;
 
     #[test]
     fn float_value_scaling_rounds_exactly_like_the_fixed_point() {
@@ -75,10 +87,10 @@ mod tests {
                     (((nv as u64 * recip[v as usize] + 255) >> 8) as u32, 0)
                 };
                 let k = nv as f32 / (v as f32).max(1.0);
-                let z = if v == 0 { 1.0 } else { 0.0 };
+                let offset = if v == 0 { nv as f32 + NUDGE } else { NUDGE };
                 for p in 0..=v {
                     let want = (((p + z_fixed) * k_fixed + (1 << 23) + (1 << 12)) >> 24) as u8;
-                    let got = byte(scale_channel(p as f32, z, k));
+                    let got = nearest(scale_channel(p as f32, k, offset));
                     assert_eq!(got, want, "p {p} v {v} nv {nv}");
                 }
             }
