@@ -24,29 +24,64 @@ fn blend_px(out: &mut ImageViewMut<'_>, x: i64, y: i64, rgb: [f32; 3], a: f32) {
     if x < 0 || y < 0 || x >= out.width as i64 || y >= out.height as i64 || a <= 0.0 {
         return;
     }
-    let f = out.format;
-    let c = f.channels();
+    let blend = Blend::new(out.format, rgb, a);
+    let c = out.format.channels();
     let row = out.row_mut(y as usize);
-    blend_into(
-        f,
-        f.rgb_offsets(),
-        &mut row[x as usize * c..x as usize * c + c],
-        rgb,
-        a.min(1.0),
-    );
+    blend.pixel(&mut row[x as usize * c..x as usize * c + c]);
 }
 
 /// Blends `rgb` into the pixel bytes `p` of `format` (colour bytes at `rgb_at`) with coverage `a`
 /// (0..=1), alpha untouched.
 #[inline]
 fn blend_into(format: PixelFormat, rgb_at: [usize; 3], p: &mut [u8], rgb: [f32; 3], a: f32) {
-    if format.is_mono() {
-        let l = 0.299 * rgb[0] + 0.587 * rgb[1] + 0.114 * rgb[2];
-        p[0] = (p[0] as f32 * (1.0 - a) + l * a + 0.5) as u8;
-        return;
+    Blend::with_offsets(format, rgb_at, rgb, a).pixel(p);
+}
+
+/// One colour blended with one coverage into many pixels: `p (1 - a) + v a`, rounded (halves up),
+/// per colour channel, with `1 - a` and `v a` computed once (the same values as computing them per
+/// pixel). Mono8 blends the colour's BT.601 luma.
+#[derive(Clone, Copy, Debug)]
+struct Blend {
+    mono: bool,
+    rgb_at: [usize; 3],
+    keep: f32,
+    add: [f32; 3],
+}
+
+impl Blend {
+    /// The blend of `rgb` with coverage `a` (clamped to at most 1) into `format` pixels.
+    #[inline]
+    fn new(format: PixelFormat, rgb: [f32; 3], a: f32) -> Self {
+        Self::with_offsets(format, format.rgb_offsets(), rgb, a.min(1.0))
     }
-    for (ch, v) in rgb_at.into_iter().zip(rgb) {
-        p[ch] = (p[ch] as f32 * (1.0 - a) + v * a + 0.5) as u8;
+
+    #[inline]
+    fn with_offsets(format: PixelFormat, rgb_at: [usize; 3], rgb: [f32; 3], a: f32) -> Self {
+        let mono = format.is_mono();
+        let add = if mono {
+            let l = 0.299 * rgb[0] + 0.587 * rgb[1] + 0.114 * rgb[2];
+            [l * a; 3]
+        } else {
+            rgb.map(|v| v * a)
+        };
+        Blend {
+            mono,
+            rgb_at,
+            keep: 1.0 - a,
+            add,
+        }
+    }
+
+    /// Blends into the bytes of one pixel.
+    #[inline(always)]
+    fn pixel(&self, p: &mut [u8]) {
+        if self.mono {
+            p[0] = (p[0] as f32 * self.keep + self.add[0] + 0.5) as u8;
+            return;
+        }
+        for (ch, add) in self.rgb_at.into_iter().zip(self.add) {
+            p[ch] = (p[ch] as f32 * self.keep + add + 0.5) as u8;
+        }
     }
 }
 
