@@ -2,7 +2,7 @@
 //! C-F6/C-F8 saturation, C-F7 posterize).
 
 use super::refuse_mono;
-use crate::camera::ops::{map_saturation, par_rows};
+use crate::camera::ops::{SaturationMap, par_rows};
 use crate::camera::pointwise::{ByteMap, ChannelMix, GainBlend, LumaBlend, channel_sums};
 use crate::camera::{CameraBuilder, CameraPerturbation, CameraSetup};
 use crate::image::{ImageView, ImageViewMut};
@@ -74,17 +74,17 @@ pub const SATURATION_INCREASE: [f32; 5] = [1.05, 1.15, 1.40, 1.65, 1.90];
 pub const SATURATION_DECREASE: [f32; 5] = [0.90, 0.85, 0.60, 0.35, 0.10];
 
 /// C-F6 saturation_increase / C-F8 saturation_decrease: HSV saturation `S' = min(255, S m)`
-/// (truncated, as the reference's uint8 write), hue and value kept; see [`map_saturation`] for how
+/// (truncated, as the reference's uint8 write), hue and value kept; see [`SaturationMap`] for how
 /// this is computed in RGB. Mono8 is refused.
 pub struct Saturation {
-    lut: [u8; 256],
+    map: SaturationMap,
 }
 
 impl Saturation {
     /// Saturation scaled by `m`.
     pub fn new(m: f32) -> Self {
         Saturation {
-            lut: std::array::from_fn(|s| (s as f32 * m).min(255.0) as u8),
+            map: SaturationMap::scaled(m),
         }
     }
 }
@@ -103,7 +103,7 @@ pub const SATURATION_DOWN: CameraBuilder = |s| {
 
 impl CameraPerturbation for Saturation {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
-        map_saturation(input, output, &self.lut);
+        self.map.apply(input, output);
     }
 }
 

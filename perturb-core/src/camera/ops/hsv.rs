@@ -1,7 +1,8 @@
 //! OpenCV's 8-bit HSV conversion and the value and saturation maps built on it.
 
-use super::channels::copy_alpha;
-use super::rows::par_rows;
+use super::channels::{copy_alpha, merge_rgb, split_rgb_bytes};
+use super::rows::{par_rows, par_rows_with};
+use super::simd::wide_fn;
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
 
 /// OpenCV's 8-bit RGB to HSV (`COLOR_RGB2HSV`): H in 0..180, S and V in 0..255, with OpenCV's
@@ -174,15 +175,16 @@ where
 /// distance below `V` is scaled by `S' / S`. Gray pixels stay gray. Mono8 is copied (it has no
 /// saturation); callers refuse it where that makes the perturbation a no-op.
 pub fn map_saturation(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, smap: &[u8; 256]) {
-    let map = SaturationMap::new(smap);
-    let format = input.format;
-    par_rows(input, output, |_, src, dst| map.row(format, src, dst));
+    SaturationMap::new(smap).apply(input, output);
 }
 
 /// The saturation mapping of [`map_saturation`] prepared for use row by row.
 pub struct SaturationMap {
     /// Per saturation S: the factor S' / S in 32.32 fixed point.
     gain: [i64; 256],
+    /// `m` when the map is `S' = min(255, floor(S m))` (`m` finite, not negative): then the rows
+    /// are computed in f64 over byte planes ([`saturation_planes`], the same bytes).
+    factor: Option<f32>,
 }
 
 impl SaturationMap {
@@ -193,7 +195,41 @@ impl SaturationMap {
         for (s, g) in gain.iter_mut().enumerate().skip(1) {
             *g = smap[s] as i64 * recip[s] as i64;
         }
-        SaturationMap { gain }
+        SaturationMap { gain, factor: None }
+    }
+
+    /// The mapping `S' = min(255, floor(S m))` (the saturation scaled by `m`, truncated as an 8-bit
+    /// write).
+    pub fn scaled(m: f32) -> Self {
+        let smap = std::array::from_fn(|s| (s as f32 * m).min(255.0) as u8);
+        SaturationMap {
+            factor: (m.is_finite() && m >= 0.0).then_some(m),
+            ..Self::new(&smap)
+        }
+    }
+
+    /// Maps every pixel of `input` into `output` (mono8 is copied, alpha is copied).
+    pub fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>) {
+        let format = input.format;
+        match self.factor {
+            Some(m) if !format.is_mono() => {
+                let w = input.width as usize;
+                par_rows_with(
+                    input,
+                    output,
+                    || vec![0u8; 3 * w],
+                    |planes, _, src, dst| {
+                        let (r, rest) = planes.split_at_mut(w);
+                        let (g, b) = rest.split_at_mut(w);
+                        split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
+                        saturation_planes(m, r, g, b);
+                        merge_rgb(format, [&*r, &*g, &*b], dst);
+                        copy_alpha(format, src, dst);
+                    },
+                );
+            }
+            _ => par_rows(input, output, |_, src, dst| self.row(format, src, dst)),
+        }
     }
 
     /// Maps one row of `format` pixels from `src` into `dst` (mono8 is copied, alpha is copied).
@@ -207,6 +243,51 @@ impl SaturationMap {
                 copy_alpha(format, src, dst);
             }
             _ => unreachable!("colour formats have 3 or 4 channels"),
+        }
+    }
+}
+
+/// 2^32 as f64.
+const TWO_32: f64 = 4_294_967_296.0;
+
+/// [`reciprocals`]`[v]`, `round(2^32 / v)`, for a whole `v` in 1..=255, in f64: the quotient of
+/// `2^32 + floor(v / 2)` by `v` is at least `1 / v` from a whole number unless it is one, far more
+/// than its rounding error (under 2^-20), so its floor is the integer quotient.
+#[inline(always)]
+fn reciprocal(v: f64) -> f64 {
+    ((TWO_32 + (v * 0.5).floor()) / v).floor()
+}
+
+/// `(x + 2^31) >> 32` for a whole `x` below 2^52, in f64 (every step exact).
+#[inline(always)]
+fn shift_round(x: f64) -> f64 {
+    ((x + 2_147_483_648.0) * (1.0 / TWO_32)).floor()
+}
+
+/// A whole float in `[0, 255]` as a byte: adding 2^52 leaves the value in the low bits.
+#[inline(always)]
+fn whole_byte(x: f64) -> u8 {
+    (x + 4_503_599_627_370_496.0).to_bits() as u8
+}
+
+wide_fn! {
+    /// [`SaturationMap`] with the factor `m` over three byte planes of a row, in place: the
+    /// fixed-point arithmetic of [`saturation_row`] carried out in f64, where every product and
+    /// sum is a whole number below 2^52 and so exact (the reciprocals and the gain `S' 2^32 / S`
+    /// computed, not looked up), giving the same bytes; a test compares the two on every colour.
+    fn saturation_planes(m: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) {
+        for ((r, g), b) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
+            let v8 = (*r).max(*g).max(*b);
+            let v = v8 as f64;
+            let diff = (v8 - (*r).min(*g).min(*b)) as f64;
+            // S = round(255 diff / V) at least 1; V = 0 has diff = 0 and S = 1 (any gain).
+            let s = shift_round(diff * 255.0 * reciprocal(v.max(1.0))).clamp(1.0, 255.0);
+            // S' as the table's f32 arithmetic computes it, then the gain S' round(2^32 / S).
+            let s2 = (s as f32 * m).min(255.0).floor() as f64;
+            let k = s2 * reciprocal(s);
+            *r = whole_byte((v - shift_round((v - *r as f64) * k)).clamp(0.0, 255.0));
+            *g = whole_byte((v - shift_round((v - *g as f64) * k)).clamp(0.0, 255.0));
+            *b = whole_byte((v - shift_round((v - *b as f64) * k)).clamp(0.0, 255.0));
         }
     }
 }
@@ -239,6 +320,43 @@ fn saturation_row<const C: usize>(
 mod tests {
     use super::*;
     use crate::image::Image;
+
+    /// The float planes against the fixed-point row on every RGB colour, for the saturation
+    /// factors of C-F6 and C-F8 and the ends of the accepted range.
+    #[test]
+    fn float_saturation_planes_give_the_fixed_point_bytes_on_every_colour() {
+        let factors = crate::camera::color::SATURATION_INCREASE
+            .into_iter()
+            .chain(crate::camera::color::SATURATION_DECREASE)
+            .chain([0.0, 0.5, 1.0, 2.0, 7.5]);
+        let (mut r, mut g, mut b) = (vec![0u8; 256], vec![0u8; 256], vec![0u8; 256]);
+        let mut src = vec![0u8; 3 * 256];
+        let mut want = vec![0u8; 3 * 256];
+        for m in factors {
+            let map = SaturationMap::scaled(m);
+            assert_eq!(map.factor, Some(m));
+            for hi in 0..=255u8 {
+                for mid in 0..=255u8 {
+                    for lo in 0..=255u8 {
+                        let i = lo as usize;
+                        (r[i], g[i], b[i]) = (hi, mid, lo);
+                        src[3 * i..3 * i + 3].copy_from_slice(&[hi, mid, lo]);
+                    }
+                    map.row(PixelFormat::Rgb8, &src, &mut want);
+                    saturation_planes(m, &mut r, &mut g, &mut b);
+                    for i in 0..256 {
+                        assert_eq!(
+                            [r[i], g[i], b[i]],
+                            [want[3 * i], want[3 * i + 1], want[3 * i + 2]],
+                            "m {m}: rgb {:?}",
+                            &src[3 * i..3 * i + 3]
+                        );
+                    }
+                }
+            }
+        }
+        assert_eq!(SaturationMap::scaled(-1.0).factor, None);
+    }
 
     #[test]
     fn map_value_scales_channels_with_exact_rounding() {
