@@ -11,6 +11,7 @@
 //! test is skipped with a message, or fails under `PERTURB_REQUIRE_ORACLES=1` (CI).
 
 use perturb_tests::{exe, have_python_modules, workspace};
+use std::io::Write;
 use std::path::Path;
 use std::process::Command;
 
@@ -30,10 +31,17 @@ fn run(cmd: &mut Command, what: &str) {
         .rev()
         .find(|l| !l.trim().is_empty())
         .unwrap_or("(no output)");
-    panic!(
+    let report = format!(
         "{what} failed ({}): {last}\n--- stdout\n{stdout}\n--- stderr\n{stderr}",
         out.status
     );
+    // Also straight to the process's stderr, past the test harness's capture: the log then shows
+    // the cause where the test runs, before the harness's summary of failures.
+    let _ = writeln!(
+        std::io::stderr().lock(),
+        "python_package_pytest_suite: {report}"
+    );
+    panic!("{report}");
 }
 
 #[test]
