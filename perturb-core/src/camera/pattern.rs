@@ -6,7 +6,7 @@
 //! references redraw them on every call.
 
 use super::ops::{copy_alpha, par_rows, wide_fn};
-use super::texture::{fill_disc, fill_rect, size_scale};
+use super::texture::{fill_disc, fill_rect, fill_span, size_scale};
 use super::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut};
 use crate::rng::Rng;
@@ -418,10 +418,19 @@ impl Cutout {
 
 impl CameraPerturbation for Cutout {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
-        copy(input, output);
-        for (x, y, w, h) in self.rects(input.width, input.height, seq) {
-            fill_rect(output, x, y, x + w, y + h, [0, 0, 0]);
-        }
+        // One pass: each row copied, then the rectangles crossing it blacked out while it is
+        // in cache (the bytes of copying the frame and filling each rectangle in turn).
+        let rects = self.rects(input.width, input.height, seq);
+        let format = input.format;
+        par_rows(input, output, |y, s, d| {
+            d.copy_from_slice(s);
+            let y = y as i64;
+            for &(x, ry, w, h) in &rects {
+                if (ry..ry + h).contains(&y) {
+                    fill_span(format, d, x, x + w, [0, 0, 0]);
+                }
+            }
+        });
     }
 }
 

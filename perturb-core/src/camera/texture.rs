@@ -44,10 +44,32 @@ pub fn fill_disc(out: &mut ImageViewMut<'_>, cx: i64, cy: i64, r: i64, rgb: [u8;
 
 /// A filled axis-aligned rectangle [x0, x1) x [y0, y1), clipped to the image.
 pub fn fill_rect(out: &mut ImageViewMut<'_>, x0: i64, y0: i64, x1: i64, y1: i64, rgb: [u8; 3]) {
-    let (w, h) = (out.width as i64, out.height as i64);
-    for y in y0.max(0)..y1.min(h) {
-        for x in x0.max(0)..x1.min(w) {
-            put(out, x, y, rgb);
+    let format = out.format;
+    for y in y0.max(0)..y1.min(out.height as i64) {
+        fill_span(format, out.row_mut(y as usize), x0, x1, rgb);
+    }
+}
+
+/// Sets the colour channels of pixels `x0..x1` of one row of `format` pixels to `rgb` (grey for
+/// mono8), alpha untouched, as [`put`] on each; the span is clipped to the row.
+pub fn fill_span(format: PixelFormat, row: &mut [u8], x0: i64, x1: i64, rgb: [u8; 3]) {
+    let c = format.channels();
+    let w = (row.len() / c) as i64;
+    let (x0, x1) = (x0.clamp(0, w) as usize, x1.clamp(0, w) as usize);
+    if x0 >= x1 {
+        return;
+    }
+    let span = &mut row[x0 * c..x1 * c];
+    if format.is_mono() {
+        span.fill(crate::image::luma(rgb[0], rgb[1], rgb[2]));
+    } else if c == 3 && rgb[0] == rgb[1] && rgb[1] == rgb[2] {
+        span.fill(rgb[0]);
+    } else {
+        let [ri, gi, bi] = format.rgb_offsets();
+        for p in span.chunks_exact_mut(c) {
+            p[ri] = rgb[0];
+            p[gi] = rgb[1];
+            p[bi] = rgb[2];
         }
     }
 }
