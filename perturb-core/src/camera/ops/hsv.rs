@@ -211,24 +211,26 @@ impl SaturationMap {
     /// Maps every pixel of `input` into `output` (mono8 is copied, alpha is copied).
     pub fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>) {
         let format = input.format;
+        par_rows_with(input, output, Vec::new, |planes, _, src, dst| {
+            self.row_in(format, src, dst, planes)
+        });
+    }
+
+    /// [`Self::row`] with a scratch buffer for the byte planes of a scaling map (the faster path;
+    /// `planes` grows to three bytes per pixel and can be reused from row to row).
+    pub fn row_in(&self, format: PixelFormat, src: &[u8], dst: &mut [u8], planes: &mut Vec<u8>) {
         match self.factor {
             Some(m) if !format.is_mono() => {
-                let w = input.width as usize;
-                par_rows_with(
-                    input,
-                    output,
-                    || vec![0u8; 3 * w],
-                    |planes, _, src, dst| {
-                        let (r, rest) = planes.split_at_mut(w);
-                        let (g, b) = rest.split_at_mut(w);
-                        split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
-                        saturation_planes(m, r, g, b);
-                        merge_rgb(format, [&*r, &*g, &*b], dst);
-                        copy_alpha(format, src, dst);
-                    },
-                );
+                let w = src.len() / format.channels();
+                planes.resize(3 * w, 0);
+                let (r, rest) = planes.split_at_mut(w);
+                let (g, b) = rest.split_at_mut(w);
+                split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
+                saturation_planes(m, r, g, b);
+                merge_rgb(format, [&*r, &*g, &*b], dst);
+                copy_alpha(format, src, dst);
             }
-            _ => par_rows(input, output, |_, src, dst| self.row(format, src, dst)),
+            _ => self.row(format, src, dst),
         }
     }
 

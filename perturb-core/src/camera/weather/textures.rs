@@ -1,6 +1,6 @@
 //! Static textures blended over the frame (C-C1 frost, C-C2 snow, C-C3 fog).
 
-use crate::camera::ops::{SaturationMap, copy_alpha, par_rows};
+use crate::camera::ops::{SaturationMap, copy_alpha, par_rows, par_rows_with};
 use crate::camera::texture::{fbm, value_noise};
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
@@ -166,14 +166,15 @@ pub fn snow_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
 pub struct TextureOverlay {
     texture: Vec<[u8; 3]>,
     weight: f32,
-    desaturate: [u8; 256],
+    /// `S' = floor(0.8 S)`.
+    desaturate: SaturationMap,
 }
 
 fn texture_overlay(texture: Vec<[u8; 3]>, weight: f32) -> TextureOverlay {
     TextureOverlay {
         texture,
         weight,
-        desaturate: std::array::from_fn(|s| (s as f32 * 0.8) as u8),
+        desaturate: SaturationMap::scaled(0.8),
     }
 }
 
@@ -201,15 +202,15 @@ impl CameraPerturbation for TextureOverlay {
         let format = input.format;
         let w = input.width as usize;
         let t = (self.weight * 256.0).round() as u32;
-        let desaturate = SaturationMap::new(&self.desaturate);
-        par_rows(input, output, |y, src, dst| {
+        let scratch = || (Vec::new(), Vec::new());
+        par_rows_with(input, output, scratch, |(blended, planes), y, src, dst| {
             let tex = &self.texture[y * w..(y + 1) * w];
             if format.is_mono() {
                 blend_texture_row(format, src, tex, t, dst);
             } else {
-                let mut blended = vec![0u8; dst.len()];
-                blend_texture_row(format, src, tex, t, &mut blended);
-                desaturate.row(format, &blended, dst);
+                blended.resize(dst.len(), 0);
+                blend_texture_row(format, src, tex, t, blended);
+                self.desaturate.row_in(format, blended, dst, planes);
             }
         });
     }
