@@ -1,8 +1,7 @@
 //! C-A4 JPEG compression: the lossy part of baseline JPEG as libjpeg computes it.
 
 use crate::camera::ops::{
-    byte, copy_alpha, frame_buffer, frame_buffer_overwritten, merge_rgb, par_rows, recycle,
-    split_rgb, wide_fn,
+    byte, copy_alpha, frame_buffer_overwritten, merge_rgb, par_rows, recycle, split_rgb, wide_fn,
 };
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
@@ -241,16 +240,6 @@ struct Plane {
 }
 
 impl Plane {
-    /// A zeroed `w x h` plane, in a finished frame's buffer when one is free (fresh pages cost
-    /// a fault and a zeroing each; see [`frame_buffer`]). Hand it back with [`Plane::recycle`].
-    fn new(w: usize, h: usize) -> Self {
-        let (pw, ph) = (w.div_ceil(8) * 8, h.div_ceil(8) * 8);
-        Plane {
-            w: pw,
-            data: frame_buffer(pw * ph.max(8)),
-        }
-    }
-
     /// A `w x h` plane whose every sample the caller writes (rows `0..h` up to `w`, then
     /// [`Plane::pad`]): not zeroed first.
     fn overwritten(w: usize, h: usize) -> Self {
@@ -473,91 +462,195 @@ impl JpegCompression {
         });
         y.recycle();
     }
+}
 
-    /// The colour frame as JPEG's planes, padded to whole blocks: full-resolution Y, and Cb and
-    /// Cr averaged over 2 x 2 pixels (4:2:0). One pair of image rows per chroma row.
-    fn to_planes(input: &ImageView<'_>) -> [Plane; 3] {
+/// Luma rows per band: one block row of chroma (8 rows at 4:2:0) is two of luma.
+const BAND_ROWS: usize = 16;
+
+/// The geometry of a colour frame's planes: `w` x `h` luma, `cw` x `ch` chroma, each padded to
+/// whole blocks (`pw`, `cpw` samples per row, `ph` luma rows).
+#[derive(Clone, Copy)]
+struct Layout {
+    w: usize,
+    h: usize,
+    cw: usize,
+    ch: usize,
+    pw: usize,
+    cpw: usize,
+    ph: usize,
+    /// Bands of [`BAND_ROWS`] luma rows (8 chroma rows).
+    bands: usize,
+}
+
+impl Layout {
+    fn of(input: &ImageView<'_>) -> Self {
         let (w, h) = (input.width as usize, input.height as usize);
-        let f = input.format;
         let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-        let mut yp = Plane::overwritten(w, h);
-        let mut cb = Plane::new(cw, ch);
-        let mut cr = Plane::new(cw, ch);
-        let (ypw, cpw) = (yp.w, cb.w);
-        yp.data
-            .par_chunks_mut(2 * ypw)
-            .zip(cb.data.par_chunks_mut(cpw).zip(cr.data.par_chunks_mut(cpw)))
-            .take(ch)
-            .enumerate()
-            .for_each_init(
-                || vec![0f32; 4 * w],
-                |work, (cy, (ypair, (cbrow, crrow)))| {
-                    let r0 = 2 * cy;
-                    let nrows = (h - r0).min(2);
-                    for k in 0..nrows {
-                        let yrow = &mut ypair[k * ypw..k * ypw + w];
-                        to_ycc(input.row(r0 + k), f, work, yrow, cbrow, crrow);
-                    }
-                    // Averages of 1, 2 or 4 samples: a power of two, so multiplying by the
-                    // reciprocal is exact. Only an odd width's last column has one sample
-                    // per row.
-                    let per_row = |cx: usize| (2 * cx + 2).min(w) - 2 * cx;
-                    let inv = |cx: usize| 1.0 / (nrows * per_row(cx)) as f32;
-                    let full = w / 2;
-                    average_chroma(&mut cbrow[..full], &mut crrow[..full], inv(0));
-                    if full < cw {
-                        average_chroma(&mut cbrow[full..cw], &mut crrow[full..cw], inv(full));
-                    }
-                },
-            );
-        yp.pad(w, h);
-        cb.pad(cw, ch);
-        cr.pad(cw, ch);
-        [yp, cb, cr]
+        Layout {
+            w,
+            h,
+            cw,
+            ch,
+            pw: w.div_ceil(8) * 8,
+            cpw: cw.div_ceil(8) * 8,
+            ph: h.div_ceil(8) * 8,
+            bands: h.div_ceil(BAND_ROWS),
+        }
     }
 
-    /// The decoded planes back to the frame's pixels with libjpeg's fancy upsampling: each output
-    /// sample weighs its nearest chroma sample 3/4 and the next one 1/4 in each direction (9/16,
-    /// 3/16, 3/16, 1/16): vertical weights first, then horizontal, then the colour conversion on
-    /// contiguous rows (vectorisable); the bytes are interleaved last.
-    fn from_planes(
-        input: &ImageView<'_>,
-        [yp, cb, cr]: &[Plane; 3],
-        output: &mut ImageViewMut<'_>,
-    ) {
-        let (w, h) = (input.width as usize, input.height as usize);
-        let f = input.format;
-        let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
-        let (ypw, cpw) = (yp.w, cb.w);
-        let vertical = |p: &Plane, cy: usize, ny: usize, t: &mut [f32]| {
-            weigh_rows(&p.data[cy * cpw..][..cw], &p.data[ny * cpw..][..cw], t);
+    /// The output rows that band `k` completes, and the rows band `k - 1`'s completion left: rows
+    /// up to `16 k + 14` need chroma rows up to `8 k + 7` (band `k`), the band's last row also
+    /// the next band's first chroma row (libjpeg's upsampling looks one chroma row down).
+    fn rows_done_after(&self, k: usize) -> std::ops::Range<usize> {
+        let start = (BAND_ROWS * k).saturating_sub(1);
+        let end = if k + 1 == self.bands {
+            self.h
+        } else {
+            BAND_ROWS * k + BAND_ROWS - 1
         };
-        let rows = output.rows_mut();
-        rows.into_par_iter()
-            .with_min_len(8)
-            .enumerate()
-            .for_each_init(
-                || (vec![0f32; cw], vec![0f32; 2 * w], vec![0u8; 3 * w]),
-                |(t, uv, planes), (r, dst)| {
-                    let cy = r / 2;
-                    let ny = if r % 2 == 0 {
-                        cy.saturating_sub(1)
-                    } else {
-                        (cy + 1).min(ch - 1)
-                    };
-                    let (u, v) = uv.split_at_mut(w);
-                    vertical(cb, cy, ny, t);
-                    upsample_row(t, u);
-                    vertical(cr, cy, ny, t);
-                    upsample_row(t, v);
-                    let yrow = &yp.data[r * ypw..][..w];
-                    let (p0, rest) = planes.split_at_mut(w);
-                    let (p1, p2) = rest.split_at_mut(w);
-                    ycc_to_rgb(yrow, u, v, p0, p1, p2);
-                    merge_rgb(f, [&*p0, &*p1, &*p2], dst);
-                    copy_alpha(f, input.row(r), dst);
-                },
+        start..end
+    }
+}
+
+/// The working set of a run of bands: the planes of two bands (the previous one and the current
+/// one, alternating by band parity), whose samples stay in cache from the colour conversion
+/// through the transforms to the upsampling, instead of whole-frame planes.
+struct Bands {
+    at: Layout,
+    /// Per parity: 16 luma rows, 8 rows of each chroma plane.
+    y: [Vec<f32>; 2],
+    cb: [Vec<f32>; 2],
+    cr: [Vec<f32>; 2],
+    /// Scratch of the colour conversion (4 w), the transforms (8 pw each), the upsampling
+    /// (cw, 2 w) and the interleaving (3 w).
+    work: Vec<f32>,
+    s1: Vec<f32>,
+    s2: Vec<f32>,
+    t: Vec<f32>,
+    uv: Vec<f32>,
+    planes: Vec<u8>,
+}
+
+impl Bands {
+    fn new(at: Layout) -> Self {
+        let two = |n: usize| [vec![0f32; n], vec![0f32; n]];
+        Bands {
+            at,
+            y: two(BAND_ROWS * at.pw),
+            cb: two(8 * at.cpw),
+            cr: two(8 * at.cpw),
+            work: vec![0f32; 4 * at.w],
+            s1: vec![0f32; 8 * at.pw.max(at.cpw)],
+            s2: vec![0f32; 8 * at.pw.max(at.cpw)],
+            t: vec![0f32; at.cw],
+            uv: vec![0f32; 2 * at.w],
+            planes: vec![0u8; 3 * at.w],
+        }
+    }
+
+    /// Band `k` of the three planes: converted to YCbCr with chroma averaged over 2 x 2 pixels
+    /// (4:2:0), padded to whole blocks by edge replication, then every block through DCT,
+    /// quantisation, dequantisation and inverse DCT.
+    fn fill(&mut self, jpeg: &JpegCompression, input: &ImageView<'_>, k: usize) {
+        let at = self.at;
+        let (w, pw, cw, cpw) = (at.w, at.pw, at.cw, at.cpw);
+        let slot = k % 2;
+        let (y, cb, cr) = (&mut self.y[slot], &mut self.cb[slot], &mut self.cr[slot]);
+        cb.fill(0.0);
+        cr.fill(0.0);
+        let top = BAND_ROWS * k;
+        let rows = at.ph.min(top + BAND_ROWS) - top;
+        for i in 0..rows {
+            let r = top + i;
+            if r < at.h {
+                let (yrow, c) = (&mut y[i * pw..(i + 1) * pw], (i / 2) * cpw);
+                let (cbrow, crrow) = (&mut cb[c..c + cpw], &mut cr[c..c + cpw]);
+                to_ycc(
+                    input.row(r),
+                    input.format,
+                    &mut self.work,
+                    &mut yrow[..w],
+                    cbrow,
+                    crrow,
+                );
+                let last = yrow[w - 1];
+                yrow[w..].fill(last);
+            } else {
+                // Below the frame: the last real row (in this band: the padding is under 8 rows).
+                y.copy_within((at.h - 1 - top) * pw..(at.h - top) * pw, i * pw);
+            }
+        }
+        let ctop = 8 * k;
+        for (j, cy) in (ctop..ctop + 8).enumerate() {
+            let c = j * cpw;
+            if cy < at.ch {
+                let (cbrow, crrow) = (&mut cb[c..c + cpw], &mut cr[c..c + cpw]);
+                // Averages of 1, 2 or 4 samples: a power of two, so multiplying by the
+                // reciprocal is exact. Only an odd width's last column has one sample per row.
+                let nrows = (at.h - 2 * cy).min(2);
+                let per_row = |cx: usize| (2 * cx + 2).min(w) - 2 * cx;
+                let inv = |cx: usize| 1.0 / (nrows * per_row(cx)) as f32;
+                let full = w / 2;
+                average_chroma(&mut cbrow[..full], &mut crrow[..full], inv(0));
+                if full < cw {
+                    average_chroma(&mut cbrow[full..cw], &mut crrow[full..cw], inv(full));
+                }
+                for p in [cbrow, crrow] {
+                    let last = p[cw - 1];
+                    p[cw..].fill(last);
+                }
+            } else {
+                let src = (at.ch - 1 - ctop) * cpw;
+                cb.copy_within(src..src + cpw, c);
+                cr.copy_within(src..src + cpw, c);
+            }
+        }
+        let (s1, s2) = (&mut self.s1, &mut self.s2);
+        let m = &jpeg.m;
+        for block_row in y[..rows * pw].chunks_exact_mut(8 * pw) {
+            let (q, qinv) = &jpeg.luma_q;
+            roundtrip_band(
+                m,
+                q,
+                qinv,
+                pw,
+                block_row,
+                &mut s1[..8 * pw],
+                &mut s2[..8 * pw],
             );
+        }
+        for p in [cb, cr] {
+            let (q, qinv) = &jpeg.chroma_q;
+            roundtrip_band(m, q, qinv, cpw, p, &mut s1[..8 * cpw], &mut s2[..8 * cpw]);
+        }
+    }
+
+    /// Output row `r` from the decoded bands with libjpeg's fancy upsampling: each output sample
+    /// weighs its nearest chroma sample 3/4 and the next one 1/4 in each direction (9/16, 3/16,
+    /// 3/16, 1/16): vertical weights first, then horizontal, then the colour conversion on
+    /// contiguous rows (vectorisable); the bytes are interleaved last.
+    fn emit(&mut self, input: &ImageView<'_>, r: usize, dst: &mut [u8]) {
+        let at = self.at;
+        let (w, cw, cpw) = (at.w, at.cw, at.cpw);
+        let cy = r / 2;
+        let ny = if r % 2 == 0 {
+            cy.saturating_sub(1)
+        } else {
+            (cy + 1).min(at.ch - 1)
+        };
+        let (u, v) = self.uv.split_at_mut(w);
+        for (planes, out) in [(&self.cb, &mut *u), (&self.cr, &mut *v)] {
+            // Chroma rows `cy` and `ny`: in the band of their parity, at their place in the band.
+            let row = |cy: usize| &planes[(cy / 8) % 2][(cy % 8) * cpw..][..cw];
+            weigh_rows(row(cy), row(ny), &mut self.t);
+            upsample_row(&self.t, out);
+        }
+        let yrow = &self.y[(r / BAND_ROWS) % 2][(r % BAND_ROWS) * at.pw..][..w];
+        let (p0, rest) = self.planes.split_at_mut(w);
+        let (p1, p2) = rest.split_at_mut(w);
+        ycc_to_rgb(yrow, u, v, p0, p1, p2);
+        merge_rgb(input.format, [&*p0, &*p1, &*p2], dst);
+        copy_alpha(input.format, input.row(r), dst);
     }
 }
 
@@ -567,15 +660,34 @@ impl CameraPerturbation for JpegCompression {
             self.apply_mono(input, output);
             return;
         }
-        let mut planes = Self::to_planes(input);
-        let [yp, cb, cr] = &mut planes;
-        self.roundtrip_plane(yp, &self.luma_q);
-        self.roundtrip_plane(cb, &self.chroma_q);
-        self.roundtrip_plane(cr, &self.chroma_q);
-        Self::from_planes(input, &planes, output);
-        for p in planes {
-            p.recycle();
+        // Runs of whole bands, one per task; a run starts by decoding the band before it (the
+        // upsampling of its first row looks one chroma row up), so no run waits for another.
+        let at = Layout::of(input);
+        let threads = rayon::current_num_threads();
+        let runs = if threads == 1 {
+            1
+        } else {
+            (2 * threads).min(at.bands.div_ceil(4)).max(1)
+        };
+        let mut rows = output.rows_mut();
+        let mut tasks = Vec::with_capacity(runs);
+        for i in (0..runs).rev() {
+            let (k0, k1) = (i * at.bands / runs, (i + 1) * at.bands / runs);
+            let start = at.rows_done_after(k0).start;
+            tasks.push((k0..k1, start, rows.split_off(start)));
         }
+        tasks.into_par_iter().for_each(|(run, start, mut rows)| {
+            let mut bands = Bands::new(at);
+            if run.start > 0 {
+                bands.fill(self, input, run.start - 1);
+            }
+            for k in run {
+                bands.fill(self, input, k);
+                for r in at.rows_done_after(k) {
+                    bands.emit(input, r, &mut *rows[r - start]);
+                }
+            }
+        });
     }
 }
 
@@ -633,5 +745,34 @@ mod tests {
                 .iter()
                 .all(|&v| v == 77)
         );
+    }
+
+    #[test]
+    fn runs_of_bands_give_the_bytes_of_one_run() {
+        // Tall odd frames split into up to six runs of bands (each decoding the band before it)
+        // against the whole frame in one run on one thread, in both colour layouts.
+        for (w, h, format) in [(61, 200, PixelFormat::Rgb8), (33, 131, PixelFormat::Bgra8)] {
+            let mut img = Image::new(w, h, format);
+            for (i, v) in img.data.iter_mut().enumerate() {
+                *v = ((i * 7919) % 251) as u8 ^ (i / (4 * w as usize)) as u8;
+            }
+            let pool = |n| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .unwrap()
+            };
+            for level in 1..=5 {
+                let run =
+                    |n| pool(n).install(|| crate::camera::apply_once(JPEG, level, 5, &img, 0));
+                let one = run(1);
+                assert_ne!(one.data, img.data, "{w}x{h} s{level}: unchanged");
+                assert_eq!(
+                    run(3).data,
+                    one.data,
+                    "{w}x{h} {format} s{level}: 3 threads"
+                );
+            }
+        }
     }
 }
