@@ -28,15 +28,27 @@ fn files(dir: &Path, ext: &str, out: &mut Vec<PathBuf>) {
     }
 }
 
-fn put(corpus: &Path, target: &str, name: &str, bytes: &[u8]) {
-    let d = corpus.join(target);
-    std::fs::create_dir_all(&d).expect("corpus folder");
-    std::fs::write(d.join(name), bytes).expect("seed file");
+/// The corpus being written: CORPUS/<target>/<name> files, counted.
+struct Corpus<'a> {
+    dir: &'a Path,
+    written: usize,
 }
 
-/// The sensor messages of every bag in DATA, cut down: (type tag, type name, CDR bytes, ROS 1
-/// bytes); the tag is the `ros_msgs` target's (0..=2 CDR, +3 the same type in ROS 1).
-fn messages(data: &Path) -> Vec<(u8, String, Vec<u8>, Vec<u8>)> {
+impl Corpus<'_> {
+    fn seed(&mut self, target: &str, name: &str, bytes: &[u8]) {
+        let d = self.dir.join(target);
+        std::fs::create_dir_all(&d).expect("corpus folder");
+        std::fs::write(d.join(name), bytes).expect("seed file");
+        self.written += 1;
+    }
+}
+
+/// A sensor message cut down: (type tag, type name, CDR bytes, ROS 1 bytes); the tag is the
+/// `ros_msgs` target's (0..=2 CDR, +3 the same type in ROS 1).
+type Message = (u8, String, Vec<u8>, Vec<u8>);
+
+/// The sensor messages of every bag in DATA, cut down.
+fn messages(data: &Path) -> Vec<Message> {
     let mut bags = Vec::new();
     files(data, ".mcap", &mut bags);
     files(data, ".bag", &mut bags);
@@ -94,115 +106,130 @@ fn main() {
         eprintln!("usage: perturb-fuzz-seeds DATA CORPUS REPO");
         std::process::exit(2);
     };
-    let mut n = 0;
-    let mut seed = |target: &str, name: &str, bytes: &[u8]| {
-        put(corpus, target, name, bytes);
-        n += 1;
+    let mut out = Corpus {
+        dir: corpus,
+        written: 0,
     };
-    let mut pngs = Vec::new();
-    files(data, ".png", &mut pngs);
-    for (i, p) in pngs.iter().enumerate() {
-        seed("image", &format!("png{i}"), &std::fs::read(p).expect("png"));
-    }
-    let mut pcds = Vec::new();
-    files(data, ".pcd", &mut pcds);
-    for (i, p) in pcds.iter().enumerate() {
-        let b = std::fs::read(p).expect("pcd");
-        seed("pcd", &format!("pcd{i}"), &b);
-        // An ASCII and a compressed copy of the first points, to reach every data encoding.
-        if let Ok(f) = perturb_core::formats::pcd::decode(&b) {
-            let v = f.cloud.view();
-            let k = v.len().min(POINTS as usize);
-            let small = perturb_core::cloud::CloudView::new(
-                v.layout_arc().clone(),
-                &v.data()[..k * v.layout().point_step as usize],
-                k as u32,
-                1,
-                k * v.layout().point_step as usize,
-                true,
-            )
-            .expect("a prefix of a valid cloud");
-            for (tag, d) in [
-                ("ascii", perturb_core::formats::pcd::PcdData::Ascii),
-                ("lzf", perturb_core::formats::pcd::PcdData::BinaryCompressed),
-            ] {
-                if let Ok(e) = perturb_core::formats::pcd::encode(&small, d, f.viewpoint) {
-                    seed("pcd", &format!("pcd{i}_{tag}"), &e);
-                }
-            }
-        }
-    }
-    let mut bins = Vec::new();
-    files(data, ".bin", &mut bins);
-    for (i, p) in bins.iter().enumerate() {
-        let b = std::fs::read(p).expect("bin");
-        let k = (b.len() / 16).min(POINTS as usize) * 16;
-        seed("kitti", &format!("bin{i}"), &b[..k]);
-    }
+    images(data, &mut out);
+    pcds(data, &mut out);
+    kitti_scans(data, &mut out);
     let msgs = messages(data);
     for (i, (tag, _, cdr, ros1)) in msgs.iter().enumerate() {
         for (t, bytes) in [(*tag, cdr), (*tag + 3, ros1)] {
             let mut v = vec![t];
             v.extend_from_slice(bytes);
-            seed("ros_msgs", &format!("msg{i}_{t}"), &v);
+            out.seed("ros_msgs", &format!("msg{i}_{t}"), &v);
         }
     }
-    // Small bags holding the real messages, one per chunk compression, plus the real bags cut
-    // to their first 64 KiB (their header, schemas and first chunk).
     let tmp = corpus.join("bags.tmp");
+    small_mcap_bags(&msgs, &tmp, &mut out);
+    small_ros1_bags(&msgs, &tmp, &mut out);
+    let _ = std::fs::remove_dir_all(&tmp);
+    real_bag_heads(data, &mut out);
+    configs(repo, &mut out);
+    println!("{} seed files in {}", out.written, corpus.display());
+}
+
+/// Every PNG in DATA, whole (`image`).
+fn images(data: &Path, out: &mut Corpus) {
+    let mut pngs = Vec::new();
+    files(data, ".png", &mut pngs);
+    for (i, p) in pngs.iter().enumerate() {
+        out.seed("image", &format!("png{i}"), &std::fs::read(p).expect("png"));
+    }
+}
+
+/// Every PCD in DATA (`pcd`), with an ASCII and a compressed copy of its first points, to reach
+/// every data encoding.
+fn pcds(data: &Path, out: &mut Corpus) {
+    use perturb_core::formats::pcd::{PcdData, decode, encode};
+    let mut pcds = Vec::new();
+    files(data, ".pcd", &mut pcds);
+    for (i, p) in pcds.iter().enumerate() {
+        let b = std::fs::read(p).expect("pcd");
+        out.seed("pcd", &format!("pcd{i}"), &b);
+        let Ok(f) = decode(&b) else { continue };
+        let v = f.cloud.view();
+        let k = v.len().min(POINTS as usize);
+        let step = v.layout().point_step as usize;
+        let small = perturb_core::cloud::CloudView::new(
+            v.layout_arc().clone(),
+            &v.data()[..k * step],
+            k as u32,
+            1,
+            k * step,
+            true,
+        )
+        .expect("a prefix of a valid cloud");
+        for (tag, d) in [
+            ("ascii", PcdData::Ascii),
+            ("lzf", PcdData::BinaryCompressed),
+        ] {
+            if let Ok(e) = encode(&small, d, f.viewpoint) {
+                out.seed("pcd", &format!("pcd{i}_{tag}"), &e);
+            }
+        }
+    }
+}
+
+/// The first points of every KITTI `.bin` scan in DATA (`kitti`).
+fn kitti_scans(data: &Path, out: &mut Corpus) {
+    let mut bins = Vec::new();
+    files(data, ".bin", &mut bins);
+    for (i, p) in bins.iter().enumerate() {
+        let b = std::fs::read(p).expect("bin");
+        let k = (b.len() / 16).min(POINTS as usize) * 16;
+        out.seed("kitti", &format!("bin{i}"), &b[..k]);
+    }
+}
+
+/// Small MCAP bags holding the real messages, one per chunk compression (`mcap`), written under
+/// `tmp`.
+fn small_mcap_bags(msgs: &[Message], tmp: &Path, out: &mut Corpus) {
     for (i, c) in [Compression::Zstd, Compression::Lz4, Compression::None]
         .into_iter()
         .enumerate()
     {
         let dir = tmp.join(format!("b{i}"));
         let _ = std::fs::remove_dir_all(&dir);
-        let mut w = BagWriter::create(
-            &dir,
-            &WriterOptions {
-                compression: c,
-                chunk_size: 4 << 10,
-            },
-        )
-        .expect("a bag writer");
+        let options = WriterOptions {
+            compression: c,
+            chunk_size: 4 << 10,
+        };
+        let mut w = BagWriter::create(&dir, &options).expect("a bag writer");
         for (k, (_, ty, bytes, _)) in msgs.iter().enumerate() {
             if let Ok(t) = w.add_topic(&format!("/t{k}"), ty) {
                 let _ = w.write(t, k as u64, k as u64, bytes);
             }
         }
-        if let Ok(path) = w.finish() {
-            let mut mcaps = Vec::new();
-            files(&path, ".mcap", &mut mcaps);
-            for m in mcaps {
-                seed(
-                    "mcap",
-                    &format!("small{i}"),
-                    &std::fs::read(m).expect("bag"),
-                );
-            }
+        let Ok(path) = w.finish() else { continue };
+        let mut mcaps = Vec::new();
+        files(&path, ".mcap", &mut mcaps);
+        for m in mcaps {
+            let bytes = std::fs::read(m).expect("bag");
+            out.seed("mcap", &format!("small{i}"), &bytes);
         }
     }
-    // The same messages in small ROS 1 bags, one per chunk compression.
-    for (i, c) in [
+}
+
+/// The same messages in small ROS 1 bags, one per chunk compression (`ros1bag`), written under
+/// `tmp`. A few messages of each type keep a bag small (tens of kilobytes), so the fuzzer runs it
+/// many times a second.
+fn small_ros1_bags(msgs: &[Message], tmp: &Path, out: &mut Corpus) {
+    let compressions = [
         Ros1Compression::None,
         Ros1Compression::Bz2,
         Ros1Compression::Lz4,
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        let _ = std::fs::create_dir_all(&tmp);
+    ];
+    for (i, c) in compressions.into_iter().enumerate() {
+        let _ = std::fs::create_dir_all(tmp);
         let path = tmp.join(format!("r{i}.bag"));
         let _ = std::fs::remove_file(&path);
-        let mut w = Ros1Writer::create(
-            &path,
-            &Ros1WriterOptions {
-                compression: c,
-                chunk_size: 4 << 10,
-            },
-        )
-        .expect("a ROS 1 bag writer");
-        // A few messages of each type keep the bag small (tens of kilobytes), so the fuzzer
-        // runs it many times a second.
+        let options = Ros1WriterOptions {
+            compression: c,
+            chunk_size: 4 << 10,
+        };
+        let mut w = Ros1Writer::create(&path, &options).expect("a ROS 1 bag writer");
         let mut per_type = [0usize; 3];
         for (k, (tag, ty, _, bytes)) in msgs.iter().enumerate() {
             let n = &mut per_type[*tag as usize];
@@ -215,20 +242,25 @@ fn main() {
             }
         }
         if let Ok(p) = w.finish() {
-            seed(
-                "ros1bag",
-                &format!("small{i}"),
-                &std::fs::read(p).expect("bag"),
-            );
+            let bytes = std::fs::read(p).expect("bag");
+            out.seed("ros1bag", &format!("small{i}"), &bytes);
         }
     }
-    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// The real MCAP bags in DATA cut to their first 64 KiB: header, schemas and first chunk (`mcap`).
+fn real_bag_heads(data: &Path, out: &mut Corpus) {
     let mut bags = Vec::new();
     files(data, ".mcap", &mut bags);
     for (i, p) in bags.iter().enumerate() {
         let b = std::fs::read(p).expect("mcap");
-        seed("mcap", &format!("real{i}"), &b[..b.len().min(64 << 10)]);
+        out.seed("mcap", &format!("real{i}"), &b[..b.len().min(64 << 10)]);
     }
+}
+
+/// The example configurations in REPO/config (`config`), each behind a byte saying whether it is
+/// a bridge's (1) or the daemon's (0).
+fn configs(repo: &Path, out: &mut Corpus) {
     let mut tomls = Vec::new();
     files(&repo.join("config"), ".toml", &mut tomls);
     for (i, p) in tomls.iter().enumerate() {
@@ -238,7 +270,6 @@ fn main() {
             .is_some_and(|f| f.to_string_lossy().starts_with("bridge"));
         let mut v = vec![bridge as u8];
         v.extend_from_slice(&text);
-        seed("config", &format!("toml{i}"), &v);
+        out.seed("config", &format!("toml{i}"), &v);
     }
-    println!("{n} seed files in {}", corpus.display());
 }
