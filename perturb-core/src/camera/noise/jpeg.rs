@@ -633,7 +633,7 @@ impl Bands {
         let at = self.at;
         let (w, cw, cpw) = (at.w, at.cw, at.cpw);
         let cy = r / 2;
-        let ny = if r % 2 == 0 {
+        let ny = if r.is_multiple_of(2) {
             cy.saturating_sub(1)
         } else {
             (cy + 1).min(at.ch - 1)
