@@ -40,6 +40,18 @@ pub fn record_topic(stream: &str, side: Side) -> String {
 /// What one recorded stream side saw: key, frames, bad frames, latency, per-hop latency.
 type SideResult = (String, u64, u64, Latency, HopLatency);
 
+/// How long a stopped side waits for more frames once its queue is empty.
+const DRAIN_WAIT: std::time::Duration = std::time::Duration::from_millis(1);
+
+/// What one stream side has recorded so far.
+#[derive(Default)]
+struct Tally {
+    got: u64,
+    bad: u64,
+    lat: Latency,
+    hops: HopLatency,
+}
+
 struct Msg {
     channel: u16,
     log_time: u64,
@@ -225,35 +237,48 @@ impl Shared<'_> {
                 return (key, 0, 0, Latency::default(), HopLatency::default());
             }
         };
-        let (mut got, mut bad, mut lat) = (0u64, 0u64, Latency::default());
-        let mut hops = HopLatency::default();
+        let mut t = Tally::default();
         let deadline = self.deadline;
+        // One frame to the bag's writer (counted), or counted as bad.
+        let take = |t: &mut Tally, meta: &FrameMeta, payload: &Payload<'_>| {
+            if max.is_some_and(|m| t.got >= m) {
+                return;
+            }
+            if payload.kind() != *kind {
+                t.bad += 1;
+                log_bad(name, t.bad, &format!("{stream}: frame of the wrong kind"));
+                return;
+            }
+            t.got += 1;
+            if meta.hops.source != 0 {
+                t.lat.add(monotonic_ns().saturating_sub(meta.hops.source));
+            }
+            t.hops.add(&meta.hops);
+            let _ = tx.send(self.message(&spec, meta, payload));
+        };
         while !self.ctl.stopped()
-            && max.is_none_or(|m| got < m)
+            && max.is_none_or(|m| t.got < m)
             && deadline.is_none_or(|d| std::time::Instant::now() < d)
         {
-            let r = sub.recv(POLL, &mut |meta, payload| {
-                if max.is_some_and(|m| got >= m) {
-                    return;
-                }
-                if payload.kind() != *kind {
-                    bad += 1;
-                    log_bad(name, bad, &format!("{stream}: frame of the wrong kind"));
-                    return;
-                }
-                got += 1;
-                if meta.hops.source != 0 {
-                    lat.add(monotonic_ns().saturating_sub(meta.hops.source));
-                }
-                hops.add(&meta.hops);
-                let _ = tx.send(self.message(&spec, meta, payload));
-            });
-            if let Err(e) = r {
-                bad += 1;
-                log_bad(name, bad, &e);
+            if let Err(e) = sub.recv(POLL, &mut |meta, payload| take(&mut t, meta, payload)) {
+                t.bad += 1;
+                log_bad(name, t.bad, &e);
             }
             self.ctl.watch_publishers(sub.as_ref());
         }
+        // Frames that had arrived when the stop came are recorded too: one side's reader
+        // falling behind the other's must not cost it the frames waiting in its queue. (A
+        // short wait, not zero: with a zero timeout the iceoryx2 wait did not return, and the
+        // bridge's stop hung in the demo's test.)
+        if self.ctl.stopped() {
+            let _ = sub.recv(DRAIN_WAIT, &mut |meta, payload| take(&mut t, meta, payload));
+        }
+        let Tally {
+            got,
+            bad,
+            lat,
+            hops,
+        } = t;
         if max.is_some_and(|m| got >= m)
             && self.done_streams.fetch_add(1, Ordering::SeqCst) + 1 == self.n_counted
         {
