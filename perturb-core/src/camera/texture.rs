@@ -14,31 +14,26 @@ pub fn size_scale(w: u32, h: u32) -> f32 {
 /// coordinates outside the image.
 #[inline]
 pub fn put(out: &mut ImageViewMut<'_>, x: i64, y: i64, rgb: [u8; 3]) {
-    if x < 0 || y < 0 || x >= out.width as i64 || y >= out.height as i64 {
-        return;
-    }
-    let f = out.format;
-    let c = f.channels();
-    let row = out.row_mut(y as usize);
-    let p = &mut row[x as usize * c..x as usize * c + c];
-    if f.is_mono() {
-        p[0] = crate::image::luma(rgb[0], rgb[1], rgb[2]);
-    } else {
-        let [ri, gi, bi] = f.rgb_offsets();
-        p[ri] = rgb[0];
-        p[gi] = rgb[1];
-        p[bi] = rgb[2];
+    if (0..out.height as i64).contains(&y) {
+        let format = out.format;
+        fill_span(format, out.row_mut(y as usize), x, x + 1, rgb);
     }
 }
 
 /// A filled disc of radius `r` (pixels whose centre satisfies dx^2 + dy^2 <= r^2), like
-/// `cv2.circle(..., thickness=-1)` without anti-aliasing.
+/// `cv2.circle(..., thickness=-1)` without anti-aliasing; one row span per row, clipped.
 pub fn fill_disc(out: &mut ImageViewMut<'_>, cx: i64, cy: i64, r: i64, rgb: [u8; 3]) {
-    for dy in -r..=r {
+    let format = out.format;
+    for y in (cy - r).max(0)..(cy + r + 1).min(out.height as i64) {
+        let dy = y - cy;
         let half = (((r * r - dy * dy) as f64).sqrt()).floor() as i64;
-        for dx in -half..=half {
-            put(out, cx + dx, cy + dy, rgb);
-        }
+        fill_span(
+            format,
+            out.row_mut(y as usize),
+            cx - half,
+            cx + half + 1,
+            rgb,
+        );
     }
 }
 

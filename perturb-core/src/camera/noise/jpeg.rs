@@ -52,6 +52,9 @@ pub struct JpegCompression {
     /// Orthonormal DCT-II matrix: `m[u][x] = c(u)/2 cos((2x+1)u pi/16)` (its transpose is the
     /// inverse transform).
     m: Block,
+    /// Band working sets of earlier frames, reused when the frame's layout is the same (a
+    /// stream's frames share it), so a frame allocates none.
+    spare: std::sync::Mutex<Vec<Bands>>,
 }
 
 type Block = [[f32; 8]; 8];
@@ -229,6 +232,7 @@ pub const JPEG: CameraBuilder = |s| {
         luma_q: transposed_steps(&scaled_table(&LUMA_Q, q)),
         chroma_q: transposed_steps(&scaled_table(&CHROMA_Q, q)),
         m,
+        spare: Default::default(),
     }))
 };
 
@@ -469,7 +473,7 @@ const BAND_ROWS: usize = 16;
 
 /// The geometry of a colour frame's planes: `w` x `h` luma, `cw` x `ch` chroma, each padded to
 /// whole blocks (`pw`, `cpw` samples per row, `ph` luma rows).
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq)]
 struct Layout {
     w: usize,
     h: usize,
@@ -677,7 +681,10 @@ impl CameraPerturbation for JpegCompression {
             tasks.push((k0..k1, start, rows.split_off(start)));
         }
         tasks.into_par_iter().for_each(|(run, start, mut rows)| {
-            let mut bands = Bands::new(at);
+            let spare = self.spare.lock().ok().and_then(|mut v| v.pop());
+            let mut bands = spare
+                .filter(|b| b.at == at)
+                .unwrap_or_else(|| Bands::new(at));
             if run.start > 0 {
                 bands.fill(self, input, run.start - 1);
             }
@@ -686,6 +693,9 @@ impl CameraPerturbation for JpegCompression {
                 for r in at.rows_done_after(k) {
                     bands.emit(input, r, &mut *rows[r - start]);
                 }
+            }
+            if let Ok(mut v) = self.spare.lock() {
+                v.push(bands);
             }
         });
     }
