@@ -119,7 +119,8 @@ pub fn posterize_lut(levels: u32) -> [u8; 256] {
 
 /// C-F7 posterize: the reference's lookup table per channel (works on mono8 too). At s4 (L = 8)
 /// the table has 9 output levels and at s5 (L = 4) {0, 85, 170, 255}, as in the reference. The
-/// table is computed as its staircase in 16-bit integer arithmetic (same bytes, see
+/// table is computed as one AND per byte (s1-s3, 32 levels and more) or one 16-entry lookup of
+/// the byte's high half (s4, s5), with the input 255 patched where it differs (same bytes, see
 /// [`ByteMap::steps`]).
 pub struct Posterize {
     map: ByteMap,

@@ -1,6 +1,7 @@
 //! [`ByteMap`]: a 256-entry table run as exact integer arithmetic where a line or a staircase
 //! reproduces it, and [`fit_fixed`] for 16.16 fixed-point tables.
 
+use super::avx2;
 use crate::camera::ops::{copy_alpha, par_rows, wide_fn};
 use crate::image::{ImageView, ImageViewMut};
 
@@ -13,6 +14,8 @@ const MAX_PATCHES: usize = 8;
 pub struct ByteMap {
     lut: [u8; 256],
     form: Form,
+    /// (input, output) pairs that replace the form's output where it differs from the table.
+    patches: Vec<(u8, u8)>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -20,50 +23,76 @@ enum Form {
     /// A lookup per byte.
     Table,
     /// `min(255, max(0, floor(v mul / 256) + add - sub) >> 7)` in 16-bit lanes (a slope of
-    /// `mul / 2^15`, results with 7 fractional bits), then `patches` (input, output) replace the
-    /// inputs where that differs from the table.
-    Line {
-        mul: u16,
-        add: u16,
-        sub: u16,
-        patches: Vec<(u8, u8)>,
-    },
+    /// `mul / 2^15`, results with 7 fractional bits).
+    Line { mul: u16, add: u16, sub: u16 },
     /// `min(255, floor(v levels / 255) scale)`: the posterize staircase.
     Steps { levels: u16, scale: u16 },
+    /// `v & and`: a staircase of power-of-two steps.
+    Mask { and: u8 },
+    /// `table[v >> 4]`: a map that depends on the high half of the byte only.
+    Nibble { table: [u8; 16] },
 }
 
 impl ByteMap {
-    /// A map computed by table lookup.
+    /// A map computed by table lookup, or by one AND or one 16-entry lookup where that gives the
+    /// table's bytes (with at most 8 patched inputs).
     pub fn table(lut: [u8; 256]) -> Self {
-        ByteMap {
+        Self::cheapest(lut).unwrap_or(ByteMap {
             lut,
             form: Form::Table,
-        }
+            patches: Vec::new(),
+        })
     }
 
     /// A map that is about `slope v + offset` clamped to 0..=255 (rounded), `0 <= slope < 2`:
     /// computed by a line in fixed point when one gives the table's bytes (with at most 8 patched
-    /// inputs), else by lookup.
+    /// inputs), else as [`ByteMap::table`].
     pub fn line(lut: [u8; 256], slope: f64, offset: f64) -> Self {
-        let form = fit_line(&lut, slope, offset).unwrap_or(Form::Table);
-        ByteMap { lut, form }
+        match fit_line(&lut, slope, offset) {
+            Some((form, patches)) => ByteMap { lut, form, patches },
+            None => Self::table(lut),
+        }
     }
 
-    /// A map that is the staircase `min(255, floor(v levels / 255) scale)` where the table is
-    /// exactly that (else by lookup).
+    /// A map that is the staircase `min(255, floor(v levels / 255) scale)`: computed as
+    /// [`ByteMap::table`] does where an AND or a 16-entry lookup fits, else as the staircase in
+    /// 16-bit arithmetic where the table is exactly that, else by lookup.
     pub fn steps(lut: [u8; 256], levels: u32, scale: u32) -> Self {
+        if let Some(cheap) = Self::cheapest(lut) {
+            return cheap;
+        }
         let form = match (u16::try_from(levels), u16::try_from(scale)) {
             (Ok(levels), Ok(scale)) if levels <= 256 && levels as u32 * scale as u32 <= 65535 => {
                 Form::Steps { levels, scale }
             }
             _ => Form::Table,
         };
-        let form = if agrees(&lut, &form) {
+        let form = if misses(&lut, &form).is_empty() {
             form
         } else {
             Form::Table
         };
-        ByteMap { lut, form }
+        ByteMap {
+            lut,
+            form,
+            patches: Vec::new(),
+        }
+    }
+
+    /// The table as one AND or one 16-entry lookup with the fewest patches, if at most
+    /// [`MAX_PATCHES`].
+    fn cheapest(lut: [u8; 256]) -> Option<Self> {
+        let nibble = std::array::from_fn(|h| most_common(&lut[16 * h..16 * h + 16]));
+        let candidates = (0..=255u8)
+            .map(|and| Form::Mask { and })
+            .chain([Form::Nibble { table: nibble }]);
+        let (form, patches) = candidates
+            .map(|form| {
+                let patches = misses(&lut, &form);
+                (form, patches)
+            })
+            .min_by_key(|(_, patches)| patches.len())?;
+        (patches.len() <= MAX_PATCHES).then_some(ByteMap { lut, form, patches })
     }
 
     /// The table.
@@ -71,26 +100,31 @@ impl ByteMap {
         &self.lut
     }
 
-    /// True when the map runs as arithmetic rather than as a lookup.
+    /// True when the map runs as arithmetic rather than as a lookup per byte.
     pub fn is_arithmetic(&self) -> bool {
         self.form != Form::Table
     }
 
     /// Maps every byte of `src` into `dst` (same length; alpha is not special here).
     pub fn row(&self, src: &[u8], dst: &mut [u8]) {
-        match &self.form {
-            Form::Table => table_bytes(&self.lut, src, dst),
-            Form::Line {
-                mul,
-                add,
-                sub,
-                patches,
-            } => {
-                line_bytes(src, *mul, *add, *sub, dst);
-                patch(patches, src, dst);
+        let kernel = match self.form {
+            Form::Table => return table_bytes(&self.lut, src, dst),
+            Form::Steps { levels, scale } => {
+                let done = avx2::steps(src, dst, levels, scale);
+                return steps_bytes(&src[done..], levels, scale, &mut dst[done..]);
             }
-            Form::Steps { levels, scale } => steps_bytes(src, *levels, *scale, dst),
+            Form::Line { mul, add, sub } => avx2::Kernel::Line { mul, add, sub },
+            Form::Mask { and } => avx2::Kernel::Mask { and },
+            Form::Nibble { table } => avx2::Kernel::Nibble { table },
+        };
+        let done = patched(src, dst, kernel, &self.patches);
+        let (src, dst) = (&src[done..], &mut dst[done..]);
+        match kernel {
+            avx2::Kernel::Line { mul, add, sub } => line_bytes(src, mul, add, sub, dst),
+            avx2::Kernel::Mask { and } => mask_bytes(src, and, dst),
+            avx2::Kernel::Nibble { table } => nibble_bytes(src, &table, dst),
         }
+        patch(&self.patches, src, dst);
     }
 
     /// Maps every colour byte of `input` into `output`; alpha is copied.
@@ -104,25 +138,34 @@ impl ByteMap {
     }
 }
 
+/// The value that occurs most often in `values` (the smallest of those tied).
+fn most_common(values: &[u8]) -> u8 {
+    let mut counts = [0u16; 256];
+    for &v in values {
+        counts[v as usize] += 1;
+    }
+    (0..=255u8)
+        .max_by_key(|&v| (counts[v as usize], std::cmp::Reverse(v)))
+        .unwrap_or(0)
+}
+
 /// The output of `form` for input `v` (the scalar definition of each kernel).
 fn eval(form: &Form, lut: &[u8; 256], v: u8) -> u8 {
-    match form {
+    match *form {
         Form::Table => lut[v as usize],
-        Form::Line {
-            mul,
-            add,
-            sub,
-            patches,
-        } => match patches.iter().find(|p| p.0 == v) {
-            Some(&(_, out)) => out,
-            None => line(v, *mul, *add, *sub),
-        },
-        Form::Steps { levels, scale } => step(v, *levels, *scale),
+        Form::Line { mul, add, sub } => line(v, mul, add, sub),
+        Form::Steps { levels, scale } => step(v, levels, scale),
+        Form::Mask { and } => v & and,
+        Form::Nibble { table } => table[(v >> 4) as usize],
     }
 }
 
-fn agrees(lut: &[u8; 256], form: &Form) -> bool {
-    (0..=255u8).all(|v| eval(form, lut, v) == lut[v as usize])
+/// The (input, table output) pairs where `form` differs from the table.
+fn misses(lut: &[u8; 256], form: &Form) -> Vec<(u8, u8)> {
+    (0..=255u8)
+        .filter(|&v| eval(form, lut, v) != lut[v as usize])
+        .map(|v| (v, lut[v as usize]))
+        .collect()
 }
 
 #[inline(always)]
@@ -143,35 +186,30 @@ fn step(v: u8, levels: u16, scale: u16) -> u8 {
 }
 
 /// The line of [`Form::Line`] closest to the table: slopes and offsets around the nominal ones,
-/// the one that misses the fewest inputs, if it misses at most [`MAX_PATCHES`].
-fn fit_line(lut: &[u8; 256], slope: f64, offset: f64) -> Option<Form> {
+/// the one that misses the fewest inputs (with those inputs), if it misses at most
+/// [`MAX_PATCHES`].
+fn fit_line(lut: &[u8; 256], slope: f64, offset: f64) -> Option<(Form, Vec<(u8, u8)>)> {
     let m0 = (slope * 32768.0).round() as i64;
     let o0 = ((offset + 0.5) * 128.0).round() as i64;
-    let mut best: Option<Form> = None;
-    let mut best_misses = usize::MAX;
+    let mut best: Option<(Form, Vec<(u8, u8)>)> = None;
     for mul in (m0 - 2).max(0)..=(m0 + 2).min(65535) {
         for off in o0 - 16..=o0 + 16 {
             let (add, sub) = (off.max(0), (-off).max(0));
             if add > 65535 || sub > 65535 {
                 continue;
             }
-            let (mul, add, sub) = (mul as u16, add as u16, sub as u16);
-            let misses: Vec<(u8, u8)> = (0..=255u8)
-                .filter(|&v| line(v, mul, add, sub) != lut[v as usize])
-                .map(|v| (v, lut[v as usize]))
-                .collect();
-            if misses.len() < best_misses {
-                best_misses = misses.len();
-                best = Some(Form::Line {
-                    mul,
-                    add,
-                    sub,
-                    patches: misses,
-                });
+            let form = Form::Line {
+                mul: mul as u16,
+                add: add as u16,
+                sub: sub as u16,
+            };
+            let patches = misses(lut, &form);
+            if best.as_ref().is_none_or(|(_, b)| patches.len() < b.len()) {
+                best = Some((form, patches));
             }
         }
     }
-    best.filter(|_| best_misses <= MAX_PATCHES)
+    best.filter(|(_, patches)| patches.len() <= MAX_PATCHES)
 }
 
 /// `(mul, add)` with `(v mul + add) >> 16 == table[v]` for every v in 0..=255 and no 32-bit
@@ -229,6 +267,32 @@ wide_fn! {
     }
 }
 
+/// `kernel` and the patches over the whole 32-byte blocks of `src` in one AVX2 pass, where the
+/// CPU has it; returns the bytes written (0 without AVX2).
+fn patched(src: &[u8], dst: &mut [u8], kernel: avx2::Kernel, patches: &[(u8, u8)]) -> usize {
+    fn fixed<const N: usize>(
+        src: &[u8],
+        dst: &mut [u8],
+        kernel: avx2::Kernel,
+        patches: &[(u8, u8)],
+    ) -> usize {
+        let keys = std::array::from_fn(|i| patches[i].0);
+        let outs = std::array::from_fn(|i| patches[i].1);
+        avx2::patched::<N>(src, dst, kernel, keys, outs)
+    }
+    match patches.len() {
+        0 => fixed::<0>(src, dst, kernel, patches),
+        1 => fixed::<1>(src, dst, kernel, patches),
+        2 => fixed::<2>(src, dst, kernel, patches),
+        3 => fixed::<3>(src, dst, kernel, patches),
+        4 => fixed::<4>(src, dst, kernel, patches),
+        5 => fixed::<5>(src, dst, kernel, patches),
+        6 => fixed::<6>(src, dst, kernel, patches),
+        7 => fixed::<7>(src, dst, kernel, patches),
+        _ => fixed::<MAX_PATCHES>(src, dst, kernel, patches),
+    }
+}
+
 /// `dst[i] = out` where `src[i] == v`, for every `(v, out)` of `patches`, in one pass.
 fn patch(patches: &[(u8, u8)], src: &[u8], dst: &mut [u8]) {
     fn fixed<const N: usize>(patches: &[(u8, u8)], src: &[u8], dst: &mut [u8]) {
@@ -259,6 +323,24 @@ wide_fn! {
                 o = if s == keys[j] { outs[j] } else { o };
             }
             *d = o;
+        }
+    }
+}
+
+wide_fn! {
+    /// `v & and` on every byte ([`Form::Mask`]).
+    fn mask_bytes(src: &[u8], and: u8, dst: &mut [u8]) {
+        for (d, &s) in dst.iter_mut().zip(src) {
+            *d = s & and;
+        }
+    }
+}
+
+wide_fn! {
+    /// `table[v >> 4]` on every byte ([`Form::Nibble`]).
+    fn nibble_bytes(src: &[u8], table: &[u8; 16], dst: &mut [u8]) {
+        for (d, &s) in dst.iter_mut().zip(src) {
+            *d = table[(s >> 4) as usize];
         }
     }
 }

@@ -12,6 +12,7 @@
 //! Every kernel here is checked against its table over all 256 inputs when it is built, so what
 //! runs is always what the table says.
 
+mod avx2;
 mod bytemap;
 mod mix;
 mod value;
@@ -40,6 +41,54 @@ mod tests {
             let mut dst = vec![0; 256];
             m.row(&src, &mut dst);
             assert_eq!(dst, lut, "{levels} levels");
+        }
+    }
+
+    #[test]
+    fn every_form_gives_its_table_at_every_length_and_offset() {
+        // The AVX2 blocks, the scalar tail and the patches of each form, on rows of every length
+        // up to three blocks and then some, starting at every offset within a block.
+        let contrast: [u8; 256] = std::array::from_fn(|v| {
+            (127.5 + (v as f32 - 127.5) * 1.2).round().clamp(0.0, 255.0) as u8
+        });
+        let wild: [u8; 256] = std::array::from_fn(|v| (v * 97 % 256) as u8);
+        let mut masked: [u8; 256] = std::array::from_fn(|v| v as u8 & 0xf0);
+        masked[7] = 200;
+        let maps = [
+            ByteMap::line(contrast, 1.2, 127.5 * (1.0 - 1.2)),
+            ByteMap::steps(crate::camera::color::posterize_lut(32), 32, 8),
+            ByteMap::steps(crate::camera::color::posterize_lut(8), 8, 36),
+            ByteMap::steps(crate::camera::color::posterize_lut(6), 6, 51),
+            ByteMap::table(masked),
+            ByteMap::table(wild),
+        ];
+        let src: Vec<u8> = (0..1024u32).map(|i| (i * 131 + i / 256) as u8).collect();
+        for m in &maps {
+            for start in 0..32 {
+                for len in (0..=100).chain([255, 256, 511]) {
+                    let s = &src[start..start + len];
+                    let mut dst = vec![0; len];
+                    m.row(s, &mut dst);
+                    let want: Vec<u8> = s.iter().map(|&v| m.lut()[v as usize]).collect();
+                    assert_eq!(dst, want, "{m:?} start {start} len {len}");
+                }
+            }
+        }
+        assert!(maps[..5].iter().all(ByteMap::is_arithmetic));
+    }
+
+    #[test]
+    fn posterize_runs_as_a_mask_or_a_nibble_table() {
+        // Each severity's staircase is one AND (32 levels and more) or one 16-entry lookup (8
+        // and 4 levels), with at most one patched input.
+        for levels in crate::camera::color::POSTERIZE_LEVELS {
+            let lut = crate::camera::color::posterize_lut(levels);
+            let m = ByteMap::steps(lut, levels, 255 / (levels - 1));
+            let form = format!("{m:?}");
+            assert!(
+                form.contains("Mask") || form.contains("Nibble"),
+                "{levels} levels: {form}"
+            );
         }
     }
 

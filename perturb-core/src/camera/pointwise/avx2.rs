@@ -1,0 +1,178 @@
+//! Hand-written AVX2 copies of [`super::ByteMap`]'s forms, 32 bytes at a time, with the patched
+//! inputs blended in the same pass.
+//!
+//! The compiler's own vectorisation of these loops falls short: it runs the line's 16-bit
+//! multiply-high in 32-bit lanes, and it cannot merge the patches into the loop of the form.
+//! These kernels spell the instructions out: for the line a byte widened to a 16-bit lane, one
+//! multiply-high, saturating adds, a shift and a saturating pack; for the mask one AND; for the
+//! 16-entry table one byte shuffle; then a compare and a blend per patch. They are integer
+//! arithmetic, so they give the bytes of the scalar definitions on every input (tests compare the
+//! two on every byte value, every tail length and the patches).
+//!
+//! Each function handles the whole 32-byte blocks of a row and returns how many bytes it wrote;
+//! the caller finishes the tail with the scalar code. Without AVX2 (or with
+//! [`crate::camera::ops::force_baseline`] on) they write nothing and return 0.
+//!
+//! Unsafe code is allowed in this module for two things only: calling the AVX2 functions after
+//! the CPU was checked to have AVX2, and unaligned 32-byte loads and stores through pointers into
+//! slices of exactly 32 bytes.
+#![allow(unsafe_code)]
+
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::*;
+
+/// What [`patched`] computes per byte before the patches (see `ByteMap`'s forms).
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Kernel {
+    /// `min(255, max(0, floor(v mul / 256) + add - sub) >> 7)`.
+    Line { mul: u16, add: u16, sub: u16 },
+    /// `v & and`.
+    Mask { and: u8 },
+    /// `table[v >> 4]`.
+    Nibble { table: [u8; 16] },
+}
+
+/// `kernel` on every whole 32-byte block of `src`, then `dst[i] = outs[j]` where
+/// `src[i] == keys[j]`; returns the bytes written.
+pub(super) fn patched<const N: usize>(
+    src: &[u8],
+    dst: &mut [u8],
+    kernel: Kernel,
+    keys: [u8; N],
+    outs: [u8; N],
+) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if crate::camera::ops::wide_available() {
+        // SAFETY: the CPU has AVX2 (`wide_available` checked it).
+        return unsafe { patched_avx2(src, dst, kernel, keys, outs) };
+    }
+    let _ = (src, dst, kernel, keys, outs);
+    0
+}
+
+/// The staircase `min(255, floor((v levels + 1) 257 / 2^16) scale)` of every whole 32-byte
+/// block of `src`; returns the bytes written.
+pub(super) fn steps(src: &[u8], dst: &mut [u8], levels: u16, scale: u16) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if crate::camera::ops::wide_available() {
+        // SAFETY: the CPU has AVX2 (`wide_available` checked it).
+        return unsafe { steps_avx2(src, dst, levels, scale) };
+    }
+    let _ = (src, dst, levels, scale);
+    0
+}
+
+/// Calls `f(x)` on each whole 32-byte block of `src` and stores its result in the same place of
+/// `dst`; returns the bytes written.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn blocks(src: &[u8], dst: &mut [u8], mut f: impl FnMut(__m256i) -> __m256i) -> usize {
+    let mut n = 0;
+    for (s, d) in src.chunks_exact(32).zip(dst.chunks_exact_mut(32)) {
+        // SAFETY: `s` and `d` are 32 bytes long, the size of the unaligned load and store.
+        unsafe {
+            let x = _mm256_loadu_si256(s.as_ptr().cast());
+            _mm256_storeu_si256(d.as_mut_ptr().cast(), f(x));
+        }
+        n += 32;
+    }
+    n
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn patched_avx2<const N: usize>(
+    src: &[u8],
+    dst: &mut [u8],
+    kernel: Kernel,
+    keys: [u8; N],
+    outs: [u8; N],
+) -> usize {
+    let keys = keys.map(|k| _mm256_set1_epi8(k as i8));
+    let outs = outs.map(|o| _mm256_set1_epi8(o as i8));
+    let patch = |x: __m256i, mut y: __m256i| {
+        for j in 0..N {
+            y = _mm256_blendv_epi8(y, outs[j], _mm256_cmpeq_epi8(x, keys[j]));
+        }
+        y
+    };
+    match kernel {
+        Kernel::Line { mul, add, sub } => {
+            let zero = _mm256_setzero_si256();
+            let mul = _mm256_set1_epi16(mul as i16);
+            let add = _mm256_set1_epi16(add as i16);
+            let sub = _mm256_set1_epi16(sub as i16);
+            // Half of the bytes as `v << 8` in 16-bit lanes: the multiply-high is
+            // floor(v mul / 256).
+            let half = |v8: __m256i| {
+                let scaled = mulhi_epu16(v8, mul);
+                _mm256_srli_epi16::<7>(_mm256_subs_epu16(_mm256_adds_epu16(scaled, add), sub))
+            };
+            blocks(src, dst, |x| {
+                let lo = half(_mm256_unpacklo_epi8(zero, x));
+                let hi = half(_mm256_unpackhi_epi8(zero, x));
+                // At most 511 per lane: the pack saturates to 255 and undoes the unpacks' order.
+                patch(x, _mm256_packus_epi16(lo, hi))
+            })
+        }
+        Kernel::Mask { and } => {
+            let and = _mm256_set1_epi8(and as i8);
+            blocks(src, dst, |x| patch(x, _mm256_and_si256(x, and)))
+        }
+        Kernel::Nibble { table } => {
+            // The 16-entry table in both 128-bit halves (the shuffle looks up within each).
+            // SAFETY: `table` is 16 bytes, the size of the unaligned load.
+            let table = unsafe { _mm_loadu_si128(table.as_ptr().cast()) };
+            let table = _mm256_broadcastsi128_si256(table);
+            let low4 = _mm256_set1_epi8(0x0f);
+            blocks(src, dst, |x| {
+                // v >> 4 per byte: a 16-bit shift, then the bits from the next byte masked off.
+                let high = _mm256_and_si256(_mm256_srli_epi16::<4>(x), low4);
+                patch(x, _mm256_shuffle_epi8(table, high))
+            })
+        }
+    }
+}
+
+/// `_mm256_mulhi_epu16` as the one instruction it names. The intrinsic is written as 32-bit
+/// products that the compiler matches back to `vpmulhuw` only when it sees both operands widened
+/// from 16 bits; with a multiplier broadcast before the loop it does not, and runs the multiply
+/// in 32-bit lanes (twice the instructions).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn mulhi_epu16(a: __m256i, b: __m256i) -> __m256i {
+    let out;
+    // SAFETY: one AVX2 instruction on registers (the features are this function's), no memory.
+    unsafe {
+        std::arch::asm!(
+            "vpmulhuw {o}, {a}, {b}",
+            o = lateout(ymm_reg) out,
+            a = in(ymm_reg) a,
+            b = in(ymm_reg) b,
+            options(pure, nomem, nostack, preserves_flags),
+        );
+    }
+    out
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn steps_avx2(src: &[u8], dst: &mut [u8], levels: u16, scale: u16) -> usize {
+    let zero = _mm256_setzero_si256();
+    let levels = _mm256_set1_epi16(levels as i16);
+    let scale = _mm256_set1_epi16(scale as i16);
+    let one = _mm256_set1_epi16(1);
+    let k257 = _mm256_set1_epi16(257);
+    let max = _mm256_set1_epi16(255);
+    let half = |v: __m256i| {
+        let t = _mm256_add_epi16(_mm256_mullo_epi16(v, levels), one);
+        let q = _mm256_mulhi_epu16(t, k257);
+        _mm256_min_epu16(_mm256_mullo_epi16(q, scale), max)
+    };
+    blocks(src, dst, |x| {
+        let lo = half(_mm256_unpacklo_epi8(x, zero));
+        let hi = half(_mm256_unpackhi_epi8(x, zero));
+        _mm256_packus_epi16(lo, hi)
+    })
+}
