@@ -97,24 +97,9 @@ fn patched_avx2<const N: usize>(
         y
     };
     match kernel {
-        Kernel::Line { mul, add, sub } => {
-            let zero = _mm256_setzero_si256();
-            let mul = _mm256_set1_epi16(mul as i16);
-            let add = _mm256_set1_epi16(add as i16);
-            let sub = _mm256_set1_epi16(sub as i16);
-            // Half of the bytes as `v << 8` in 16-bit lanes: the multiply-high is
-            // floor(v mul / 256).
-            let half = |v8: __m256i| {
-                let scaled = mulhi_epu16(v8, mul);
-                _mm256_srli_epi16::<7>(_mm256_subs_epu16(_mm256_adds_epu16(scaled, add), sub))
-            };
-            blocks(src, dst, |x| {
-                let lo = half(_mm256_unpacklo_epi8(zero, x));
-                let hi = half(_mm256_unpackhi_epi8(zero, x));
-                // At most 511 per lane: the pack saturates to 255 and undoes the unpacks' order.
-                patch(x, _mm256_packus_epi16(lo, hi))
-            })
-        }
+        // A zero offset is left out of the arithmetic (contrast's lines never add).
+        Kernel::Line { mul, add: 0, sub } => line_blocks::<false>(src, dst, mul, 0, sub, patch),
+        Kernel::Line { mul, add, sub } => line_blocks::<true>(src, dst, mul, add, sub, patch),
         Kernel::Mask { and } => {
             let and = _mm256_set1_epi8(and as i8);
             blocks(src, dst, |x| patch(x, _mm256_and_si256(x, and)))
@@ -132,6 +117,39 @@ fn patched_avx2<const N: usize>(
             })
         }
     }
+}
+
+/// [`Kernel::Line`] over the whole 32-byte blocks, then `patch(input, output)`; `ADD` false when
+/// `add` is 0.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn line_blocks<const ADD: bool>(
+    src: &[u8],
+    dst: &mut [u8],
+    mul: u16,
+    add: u16,
+    sub: u16,
+    patch: impl Fn(__m256i, __m256i) -> __m256i,
+) -> usize {
+    let zero = _mm256_setzero_si256();
+    let mul = _mm256_set1_epi16(mul as i16);
+    let add = _mm256_set1_epi16(add as i16);
+    let sub = _mm256_set1_epi16(sub as i16);
+    // Half of the bytes as `v << 8` in 16-bit lanes: the multiply-high is floor(v mul / 256).
+    let half = |v8: __m256i| {
+        let mut scaled = mulhi_epu16(v8, mul);
+        if ADD {
+            scaled = _mm256_adds_epu16(scaled, add);
+        }
+        _mm256_srli_epi16::<7>(_mm256_subs_epu16(scaled, sub))
+    };
+    blocks(src, dst, |x| {
+        let lo = half(_mm256_unpacklo_epi8(zero, x));
+        let hi = half(_mm256_unpackhi_epi8(zero, x));
+        // At most 511 per lane: the pack saturates to 255 and undoes the unpacks' order.
+        patch(x, _mm256_packus_epi16(lo, hi))
+    })
 }
 
 /// `_mm256_mulhi_epu16` as the one instruction it names. The intrinsic is written as 32-bit
