@@ -1,7 +1,8 @@
 //! C-A4 JPEG compression: the lossy part of baseline JPEG as libjpeg computes it.
 
 use crate::camera::ops::{
-    byte, copy_alpha, frame_buffer_overwritten, merge_rgb, par_rows, recycle, split_rgb, wide_fn,
+    Block, byte, copy_alpha, frame_buffer_overwritten, merge_rgb, par_rows, recycle, split_rgb,
+    transpose_blocks, wide_fn,
 };
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
@@ -56,8 +57,6 @@ pub struct JpegCompression {
     /// stream's frames share it), so a frame allocates none.
     spare: std::sync::Mutex<Vec<Bands>>,
 }
-
-type Block = [[f32; 8]; 8];
 
 /// Round to nearest (ties to even) without a libm call: adding and subtracting 1.5 x 2^23 pushes the
 /// fraction out of an f32's mantissa. Exact for |x| < 2^22, far beyond any DCT coefficient.
@@ -133,84 +132,6 @@ fn idct_columns(m: &Block, band: &[f32], pw: usize, out: &mut [f32]) {
             o2[l] = even - odd;
         }
     }
-}
-
-/// Transposes every 8x8 block of a band in place.
-#[inline(always)]
-fn transpose_blocks(band: &mut [f32], pw: usize) {
-    for bx in 0..pw / 8 {
-        let at = |y: usize| y * pw + bx * 8..y * pw + bx * 8 + 8;
-        let mut blk = [[0f32; 8]; 8];
-        for (y, row) in blk.iter_mut().enumerate() {
-            *row = band[at(y)].try_into().expect("8 samples");
-        }
-        for (y, row) in transpose8(&blk).iter().enumerate() {
-            band[at(y)].copy_from_slice(row);
-        }
-    }
-}
-
-/// The transpose of an 8x8 block, in three stages of two-row shuffles (interleave pairs, then
-/// pairs of pairs, then halves): each stage is one shuffle instruction per row when the rows are
-/// vectors, where an element-by-element transpose goes through memory.
-#[inline(always)]
-fn transpose8(a: &Block) -> Block {
-    #[inline(always)]
-    fn lo(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
-        [x[0], y[0], x[1], y[1], x[4], y[4], x[5], y[5]]
-    }
-    #[inline(always)]
-    fn hi(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
-        [x[2], y[2], x[3], y[3], x[6], y[6], x[7], y[7]]
-    }
-    #[inline(always)]
-    fn lo2(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
-        [x[0], x[1], y[0], y[1], x[4], x[5], y[4], y[5]]
-    }
-    #[inline(always)]
-    fn hi2(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
-        [x[2], x[3], y[2], y[3], x[6], x[7], y[6], y[7]]
-    }
-    #[inline(always)]
-    fn lo4(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
-        [x[0], x[1], x[2], x[3], y[0], y[1], y[2], y[3]]
-    }
-    #[inline(always)]
-    fn hi4(x: &[f32; 8], y: &[f32; 8]) -> [f32; 8] {
-        [x[4], x[5], x[6], x[7], y[4], y[5], y[6], y[7]]
-    }
-    // After stage 1, t[2i] and t[2i+1] interleave rows 2i and 2i+1.
-    let t = [
-        lo(&a[0], &a[1]),
-        hi(&a[0], &a[1]),
-        lo(&a[2], &a[3]),
-        hi(&a[2], &a[3]),
-        lo(&a[4], &a[5]),
-        hi(&a[4], &a[5]),
-        lo(&a[6], &a[7]),
-        hi(&a[6], &a[7]),
-    ];
-    // After stage 2, u[k] (k < 4) holds columns k and k + 4 of rows 0-3, u[k + 4] of rows 4-7.
-    let u = [
-        lo2(&t[0], &t[2]),
-        hi2(&t[0], &t[2]),
-        lo2(&t[1], &t[3]),
-        hi2(&t[1], &t[3]),
-        lo2(&t[4], &t[6]),
-        hi2(&t[4], &t[6]),
-        lo2(&t[5], &t[7]),
-        hi2(&t[5], &t[7]),
-    ];
-    [
-        lo4(&u[0], &u[4]),
-        lo4(&u[1], &u[5]),
-        lo4(&u[2], &u[6]),
-        lo4(&u[3], &u[7]),
-        hi4(&u[0], &u[4]),
-        hi4(&u[1], &u[5]),
-        hi4(&u[2], &u[6]),
-        hi4(&u[3], &u[7]),
-    ]
 }
 
 /// Registry constructor of C-A4.
@@ -705,17 +626,6 @@ impl CameraPerturbation for JpegCompression {
 mod tests {
     use super::*;
     use crate::image::{Image, PixelFormat};
-
-    #[test]
-    fn the_shuffle_transpose_is_a_transpose() {
-        let a: Block = std::array::from_fn(|i| std::array::from_fn(|j| (i * 8 + j) as f32));
-        let t = transpose8(&a);
-        for i in 0..8 {
-            for j in 0..8 {
-                assert_eq!(t[j][i], a[i][j]);
-            }
-        }
-    }
 
     #[test]
     fn jpeg_quantisation_matches_libjpeg_scaling_and_blocks_appear() {

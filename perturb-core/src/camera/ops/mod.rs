@@ -9,6 +9,7 @@ mod gaussian;
 mod hsv;
 mod rows;
 mod simd;
+mod transpose;
 
 pub use buffers::*;
 pub use channels::*;
@@ -19,3 +20,4 @@ pub use hsv::*;
 pub use rows::*;
 pub(crate) use simd::wide_fn;
 pub use simd::*;
+pub use transpose::*;
