@@ -252,7 +252,7 @@ wide_fn! {
 
 wide_fn! {
     /// JFIF RGB to YCbCr of one row of `c`-byte pixels: luma into `y`, chroma added into the
-    /// half-width `cb`, `cr` (left pixel of each pair first). `work` (4 `y.len()` floats) holds the
+    /// half-width `cb`, `cr` (left pixel of each pair first). `work` (3 `y.len()` floats) holds the
     /// row deinterleaved, so that the arithmetic runs on contiguous arrays.
     fn to_ycc(
         src: &[u8],
@@ -264,33 +264,33 @@ wide_fn! {
     ) {
         let w = y.len();
         let (r, rest) = work.split_at_mut(w);
-        let (g, rest) = rest.split_at_mut(w);
-        let (b, t) = rest.split_at_mut(w);
+        let (g, b) = rest.split_at_mut(w);
+        let b = &mut b[..w];
         split_rgb(src, format, [&mut *r, &mut *g, &mut *b]);
-        let rgb = || r.iter().zip(g.iter()).zip(b.iter());
-        for (yv, ((&r, &g), &b)) in y.iter_mut().zip(rgb()) {
-            *yv = 0.299 * r + 0.587 * g + 0.114 * b;
+        let luma = |r: f32, g: f32, b: f32| 0.299 * r + 0.587 * g + 0.114 * b;
+        let blue = |r: f32, g: f32, b: f32| -0.168_736 * r - 0.331_264 * g + 0.5 * b;
+        let red = |r: f32, g: f32, b: f32| 0.5 * r - 0.418_688 * g - 0.081_312 * b;
+        // Whole pairs of pixels in one loop (each chroma sum adds the left pixel, then the
+        // right one), an odd last pixel on its own.
+        let n = w / 2;
+        fn pairs(p: &[f32], n: usize) -> std::slice::ChunksExact<'_, f32> {
+            p[..2 * n].chunks_exact(2)
         }
-        // Whole pairs in one branch-free loop, an odd last sample on its own.
-        let pair_sums = |t: &[f32], out: &mut [f32]| {
-            let pairs = t.chunks_exact(2);
-            let last = pairs.remainder().first().copied();
-            let n = pairs.len();
-            for (o, pair) in out.iter_mut().zip(pairs) {
-                *o = (*o + pair[0]) + pair[1];
-            }
-            if let (Some(a), Some(o)) = (last, out.get_mut(n)) {
-                *o += a;
-            }
-        };
-        for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
-            *tv = -0.168_736 * r - 0.331_264 * g + 0.5 * b;
+        let (cbp, crp) = (&mut cb[..n], &mut cr[..n]);
+        let out = y[..2 * n].chunks_exact_mut(2).zip(cbp).zip(crp);
+        let rgb = pairs(r, n).zip(pairs(g, n)).zip(pairs(b, n));
+        for (((yv, cbv), crv), ((r, g), b)) in out.zip(rgb) {
+            yv[0] = luma(r[0], g[0], b[0]);
+            yv[1] = luma(r[1], g[1], b[1]);
+            *cbv = (*cbv + blue(r[0], g[0], b[0])) + blue(r[1], g[1], b[1]);
+            *crv = (*crv + red(r[0], g[0], b[0])) + red(r[1], g[1], b[1]);
         }
-        pair_sums(t, cb);
-        for (tv, ((&r, &g), &b)) in t.iter_mut().zip(rgb()) {
-            *tv = 0.5 * r - 0.418_688 * g - 0.081_312 * b;
+        if w % 2 == 1 {
+            let (r, g, b) = (r[w - 1], g[w - 1], b[w - 1]);
+            y[w - 1] = luma(r, g, b);
+            cb[n] += blue(r, g, b);
+            cr[n] += red(r, g, b);
         }
-        pair_sums(t, cr);
     }
 }
 
@@ -464,7 +464,7 @@ impl Bands {
             y: two(BAND_ROWS * at.pw),
             cb: two(8 * at.cpw),
             cr: two(8 * at.cpw),
-            work: vec![0f32; 4 * at.w],
+            work: vec![0f32; 3 * at.w],
             s1: vec![0f32; 8 * at.pw.max(at.cpw)],
             s2: vec![0f32; 8 * at.pw.max(at.cpw)],
             t: vec![0f32; at.cw],
