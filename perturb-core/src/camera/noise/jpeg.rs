@@ -71,16 +71,24 @@ fn round_f32(x: f32) -> f32 {
 /// band's width. With the even-odd split of the DCT-II: rows k and 7 - k enter the even outputs as
 /// their sum and the odd ones as their difference (`m[u][7 - k] = +-m[u][k]`), half the
 /// multiplications of the plain product; each output sums its four products in order from zero.
-/// `scratch` holds 8 rows.
+/// `scratch` holds 8 rows. With `SHIFT`, 128 is subtracted from every sample as it is read.
 #[inline(always)]
-fn dct_columns(m: &Block, band: &[f32], pw: usize, scratch: &mut [f32], out: &mut [f32]) {
+fn dct_columns<const SHIFT: bool>(
+    m: &Block,
+    band: &[f32],
+    pw: usize,
+    scratch: &mut [f32],
+    out: &mut [f32],
+) {
+    let shift = |v: f32| if SHIFT { v - 128.0 } else { v };
     let row = |r: usize| &band[r * pw..(r + 1) * pw];
     let (sums, diffs) = scratch.split_at_mut(4 * pw);
     for k in 0..4 {
         let (a, b) = (row(k), row(7 - k));
         let s = &mut sums[k * pw..(k + 1) * pw];
         let d = &mut diffs[k * pw..(k + 1) * pw];
-        for (((s, d), a), b) in s.iter_mut().zip(d.iter_mut()).zip(a).zip(b) {
+        for (((s, d), &a), &b) in s.iter_mut().zip(d.iter_mut()).zip(a).zip(b) {
+            let (a, b) = (shift(a), shift(b));
             *s = a + b;
             *d = a - b;
         }
@@ -104,9 +112,17 @@ fn dct_columns(m: &Block, band: &[f32], pw: usize, scratch: &mut [f32], out: &mu
 
 /// `M^T C` (the inverse DCT) for the DCT matrix `M` and every 8x8 block `C` of a band, into
 /// `out`, as long loops over the band's width: the even and odd coefficients' sums (each in
-/// order from zero) for outputs x < 4 give outputs x and 7 - x as their sum and difference.
+/// order from zero) for outputs x < 4 give outputs x and 7 - x as their sum and difference. With
+/// `LAST`, every output is shifted back by 128 and clamped to 0..=255 as it is stored.
 #[inline(always)]
-fn idct_columns(m: &Block, band: &[f32], pw: usize, out: &mut [f32]) {
+fn idct_columns<const LAST: bool>(m: &Block, band: &[f32], pw: usize, out: &mut [f32]) {
+    let finish = |v: f32| {
+        if LAST {
+            (v + 128.0).clamp(0.0, 255.0)
+        } else {
+            v
+        }
+    };
     let row = |u: usize| &band[u * pw..(u + 1) * pw];
     let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
     let (r4, r5, r6, r7) = (row(4), row(5), row(6), row(7));
@@ -128,8 +144,8 @@ fn idct_columns(m: &Block, band: &[f32], pw: usize, out: &mut [f32]) {
             odd += mx[5] * r5[l];
             even += mx[6] * r6[l];
             odd += mx[7] * r7[l];
-            o1[l] = even + odd;
-            o2[l] = even - odd;
+            o1[l] = finish(even + odd);
+            o2[l] = finish(even - odd);
         }
     }
 }
@@ -225,14 +241,12 @@ wide_fn! {
         s1: &mut [f32],
         s2: &mut [f32],
     ) {
-        for v in band.iter_mut() {
-            *v -= 128.0;
-        }
-        // Forward: the coefficients C = M B M^T come out transposed, C^T = M (M B)^T; they are
-        // quantised and dequantised as C^T.
-        dct_columns(m, band, pw, s1, s2);
+        // Forward, the samples level-shifted by 128 as the first pass reads them: the
+        // coefficients C = M B M^T come out transposed, C^T = M (M B)^T; they are quantised and
+        // dequantised as C^T.
+        dct_columns::<true>(m, band, pw, s1, s2);
         transpose_blocks(s2, pw);
-        dct_columns(m, s2, pw, s1, band);
+        dct_columns::<false>(m, s2, pw, s1, band);
         for (row, (qi, q)) in band.chunks_exact_mut(pw).zip(qinv_t.iter().zip(q_t)) {
             for blk in row.chunks_exact_mut(8) {
                 for ((coef, qi), q) in blk.iter_mut().zip(qi).zip(q) {
@@ -241,12 +255,10 @@ wide_fn! {
             }
         }
         // Inverse: B = M^T C M = M^T (M^T C^T)^T.
-        idct_columns(m, band, pw, s2);
+        // The last pass shifts back by 128 and clamps to 0..=255 as it stores.
+        idct_columns::<false>(m, band, pw, s2);
         transpose_blocks(s2, pw);
-        idct_columns(m, s2, pw, band);
-        for v in band.iter_mut() {
-            *v = (*v + 128.0).clamp(0.0, 255.0);
-        }
+        idct_columns::<true>(m, s2, pw, band);
     }
 }
 
