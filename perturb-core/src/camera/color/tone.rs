@@ -2,7 +2,7 @@
 //! C-F6/C-F8 saturation, C-F7 posterize).
 
 use super::refuse_mono;
-use crate::camera::ops::{SaturationMap, par_rows};
+use crate::camera::ops::{SaturationMap, par_rows, par_rows_with};
 use crate::camera::pointwise::{ByteMap, ChannelMix, GainBlend, LumaBlend, channel_sums};
 use crate::camera::{CameraBuilder, CameraPerturbation, CameraSetup};
 use crate::image::{ImageView, ImageViewMut};
@@ -13,8 +13,8 @@ pub const GRAYSCALE_WEIGHT: [f32; 5] = [0.10, 0.20, 0.35, 0.55, 0.85];
 
 /// C-F5 grayscale: `out = (1 - s) I + s Y` per colour channel with `Y = .299 R + .587 G + .114 B`,
 /// in 8.8 fixed point (two 256-entry tables for the two terms), rounded; alpha is copied. The
-/// tables are computed as 16.16 fixed-point lines in 32-bit lanes (same bytes, see
-/// [`LumaBlend`]). Mono8 input is refused: it is already grey, so the perturbation would do
+/// tables are computed as 16.16 fixed-point lines in 32-bit lanes, or with AVX2 as split 16-bit
+/// slopes in 16-bit lanes over byte planes (same bytes, see [`LumaBlend`]). Mono8 input is refused: it is already grey, so the perturbation would do
 /// nothing.
 pub struct Grayscale {
     keep: [u16; 256],
@@ -32,9 +32,7 @@ pub const GRAYSCALE: CameraBuilder = |s| {
 impl Grayscale {
     /// Configures the blend weight for the severity.
     pub fn new(setup: &CameraSetup) -> Self {
-        let w = GRAYSCALE_WEIGHT[setup.level()];
-        let keep = std::array::from_fn(|v| ((1.0 - w) * v as f32 * 256.0).round() as u16);
-        let luma = std::array::from_fn(|v| (w * v as f32 * 256.0).round() as u16);
+        let (keep, luma) = grayscale_tables(GRAYSCALE_WEIGHT[setup.level()]);
         Grayscale {
             keep,
             luma,
@@ -43,11 +41,22 @@ impl Grayscale {
     }
 }
 
+/// C-F5's two tables for the blend weight `w`, in 8.8 fixed point: the kept part of a channel
+/// `round((1 - w) v 256)` and the luma's part `round(w v 256)`.
+pub fn grayscale_tables(w: f32) -> ([u16; 256], [u16; 256]) {
+    (
+        std::array::from_fn(|v| ((1.0 - w) * v as f32 * 256.0).round() as u16),
+        std::array::from_fn(|v| (w * v as f32 * 256.0).round() as u16),
+    )
+}
+
 impl CameraPerturbation for Grayscale {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, _seq: u64) {
         let format = input.format;
         if let Some(fast) = &self.fast {
-            return par_rows(input, output, |_, src, dst| fast.row(format, src, dst));
+            return par_rows_with(input, output, Vec::new, |planes, _, src, dst| {
+                fast.row_in(format, src, dst, planes)
+            });
         }
         let [ri, gi, bi] = format.rgb_offsets();
         let c = format.channels();

@@ -1,7 +1,7 @@
 //! Blends across channels: C-F1's channel mixes, C-F5's blend towards the luma, C-F4's gain blend.
 
 use super::bytemap::{fit_fixed, fit_fixed_near};
-use crate::camera::ops::wide_fn;
+use crate::camera::ops::{copy_alpha, merge_rgb, split_rgb_bytes, wide_fn};
 use crate::image::PixelFormat;
 
 /// The three channel permutations and two arithmetic mixes of C-F1 false colour, on the
@@ -94,19 +94,67 @@ wide_fn! {
 /// C-F5's blend towards the luma, `out = (keep[c] + luma[Y] + 128) >> 8` per colour channel
 /// (`Y` the BT.601 luma of the pixel, [`crate::image::luma`]), with both 16-bit tables computed as
 /// their 16.16 fixed-point lines (found by [`fit_fixed`]; `None` when a table is no such line).
+///
+/// Where both tables also have a [`Split16`] form (every C-F5 severity does) and the CPU has
+/// AVX2, rows run in 16-bit lanes over byte planes ([`LumaBlend::row_in`]), with the same bytes.
 #[derive(Clone, Copy, Debug)]
 pub struct LumaBlend {
     keep: (u32, u32),
     luma: (u32, u32),
+    /// The tables in 16-bit arithmetic, when both have that form and their sum stays in 16 bits.
+    narrow: Option<(Split16, Split16)>,
+}
+
+/// A table `t[v] = a v + ((b v + 2^15) >> 16)` for every byte `v`: a slope with a 16-bit whole part
+/// and a 16-bit fraction, rounded once, which 16-bit lanes compute exactly (`a v` and the low half
+/// of `b v` by multiply-low, the high half by multiply-high, the rounding carry as the low half's
+/// top bit).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Split16 {
+    /// Whole part of the slope.
+    pub a: u16,
+    /// Fraction of the slope, in 2^-16.
+    pub b: u16,
+}
+
+impl Split16 {
+    /// The form of `table`, if it has one (searched around the table's mean slope).
+    pub fn fit(table: &[u16; 256]) -> Option<Self> {
+        let slope = (table[255] as f64 - table[0] as f64) / 255.0;
+        if !(0.0..256.0).contains(&slope) {
+            return None;
+        }
+        let a = slope.floor() as u16;
+        let b0 = ((slope - a as f64) * 65536.0).round() as i64;
+        (0..=4096)
+            .flat_map(|d| [b0 - d, b0 + d])
+            .filter_map(|b| u16::try_from(b).ok())
+            .map(|b| Split16 { a, b })
+            .find(|f| (0..=255u8).all(|v| f.eval(v as u16) == table[v as usize] as u32))
+    }
+
+    /// `a v + ((b v + 2^15) >> 16)`.
+    #[inline(always)]
+    pub fn eval(self, v: u16) -> u32 {
+        self.a as u32 * v as u32 + ((self.b as u32 * v as u32 + (1 << 15)) >> 16)
+    }
 }
 
 impl LumaBlend {
     /// The arithmetic form of the tables `keep` and `luma`, if both have one.
     pub fn fit(keep: &[u16; 256], luma: &[u16; 256]) -> Option<Self> {
         let widen = |t: &[u16; 256]| -> [u32; 256] { std::array::from_fn(|v| t[v] as u32) };
+        let narrow = match (Split16::fit(keep), Split16::fit(luma)) {
+            // The sum keep + luma + 128 must stay below 2^16 for every channel and luma.
+            (Some(k), Some(l)) if keep[255] as u32 + luma[255] as u32 + 128 <= 65535 => {
+                Some((k, l))
+            }
+            _ => None,
+        };
         Some(LumaBlend {
             keep: fit_fixed(&widen(keep))?,
             luma: fit_fixed(&widen(luma))?,
+            narrow,
         })
     }
 
@@ -120,6 +168,31 @@ impl LumaBlend {
             PixelFormat::Mono8 => dst.copy_from_slice(src),
         }
     }
+
+    /// [`Self::row`] through byte planes in 16-bit lanes where the tables have that form and the
+    /// CPU has AVX2 (`planes` grows to three bytes per pixel and can be reused from row to row);
+    /// the same bytes.
+    pub fn row_in(&self, format: PixelFormat, src: &[u8], dst: &mut [u8], planes: &mut Vec<u8>) {
+        let Some((keep, luma)) = self.narrow else {
+            return self.row(format, src, dst);
+        };
+        if format.is_mono() || !crate::camera::ops::wide_available() {
+            return self.row(format, src, dst);
+        }
+        planes.resize(3 * (src.len() / format.channels()), 0);
+        luma_blend_planar(*self, (keep, luma), format, src, planes, dst);
+    }
+
+    /// The blend of one pixel's red, green and blue.
+    #[inline(always)]
+    fn pixel(&self, r: u8, g: u8, b: u8) -> [u8; 3] {
+        let ((km, ka), (lm, la)) = (self.keep, self.luma);
+        let (r, g, b) = (r as u32, g as u32, b as u32);
+        let y = (r * 19595 + g * 38470 + b * 7471 + 32768) >> 16;
+        let ly = ((y * lm + la) >> 16) + 128;
+        let blend = |c: u32| ((((c * km + ka) >> 16) + ly) >> 8).min(255) as u8;
+        [blend(r), blend(g), blend(b)]
+    }
 }
 
 wide_fn! {
@@ -129,19 +202,37 @@ wide_fn! {
         src: &[u8],
         dst: &mut [u8],
     ) {
-        let ((km, ka), (lm, la)) = (m.keep, m.luma);
         for (p, q) in src.chunks_exact(C).zip(dst.chunks_exact_mut(C)) {
-            let (r, g, b) = (p[R] as u32, p[1] as u32, p[B] as u32);
-            let y = (r * 19595 + g * 38470 + b * 7471 + 32768) >> 16;
-            let ly = ((y * lm + la) >> 16) + 128;
-            let blend = |c: u32| ((((c * km + ka) >> 16) + ly) >> 8).min(255) as u8;
-            q[R] = blend(r);
-            q[1] = blend(g);
-            q[B] = blend(b);
+            [q[R], q[1], q[B]] = m.pixel(p[R], p[1], p[B]);
             if C == 4 {
                 q[3] = p[3];
             }
         }
+    }
+}
+
+wide_fn! {
+    /// [`LumaBlend::row_in`]: the row split into the three byte planes of `planes`, blended 16
+    /// pixels at a time in 16-bit lanes (the rest pixel by pixel), merged back; alpha copied.
+    fn luma_blend_planar(
+        m: LumaBlend,
+        narrow: (Split16, Split16),
+        format: PixelFormat,
+        src: &[u8],
+        planes: &mut [u8],
+        dst: &mut [u8],
+    ) {
+        let w = planes.len() / 3;
+        let (r, rest) = planes.split_at_mut(w);
+        let (g, b) = rest.split_at_mut(w);
+        split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
+        let done = super::avx2::luma_blend_planes(narrow.0, narrow.1, r, g, b);
+        let rest = r[done..].iter_mut().zip(&mut g[done..]).zip(&mut b[done..]);
+        for ((r, g), b) in rest {
+            [*r, *g, *b] = m.pixel(*r, *g, *b);
+        }
+        merge_rgb(format, [&*r, &*g, &*b], dst);
+        copy_alpha(format, src, dst);
     }
 }
 
@@ -311,9 +402,7 @@ mod tests {
         // Grayscale's two tables at every severity fit, and the blend equals the table formula
         // on every (channel, luma) pair.
         for w in crate::camera::color::GRAYSCALE_WEIGHT {
-            let keep: [u16; 256] =
-                std::array::from_fn(|v| ((1.0 - w) * v as f32 * 256.0).round() as u16);
-            let luma: [u16; 256] = std::array::from_fn(|v| (w * v as f32 * 256.0).round() as u16);
+            let (keep, luma) = crate::camera::color::grayscale_tables(w);
             let m = LumaBlend::fit(&keep, &luma).expect("grayscale tables fit");
             let ((km, ka), (lm, la)) = (m.keep, m.luma);
             for c in 0..256u32 {
@@ -363,6 +452,50 @@ mod tests {
             }
         }
         assert!(fitted >= 15, "only {fitted} of 20 white balances fitted");
+    }
+
+    #[test]
+    fn the_16_bit_luma_blend_gives_the_bytes_of_the_32_bit_one() {
+        // Every severity's tables have the 16-bit form, equal to the tables on every byte; the
+        // 16-bit luma split into high and low coefficient bytes equals the luma on every colour;
+        // rows through the planes (AVX2 blocks and the scalar tail) equal the pixel-by-pixel rows
+        // for every format and many lengths.
+        for w in crate::camera::color::GRAYSCALE_WEIGHT {
+            let (keep, luma) = crate::camera::color::grayscale_tables(w);
+            let m = LumaBlend::fit(&keep, &luma).expect("grayscale tables fit");
+            let (k, l) = m.narrow.expect("16-bit forms");
+            for v in 0..=255u16 {
+                assert_eq!(k.eval(v), keep[v as usize] as u32, "w {w} keep {v}");
+                assert_eq!(l.eval(v), luma[v as usize] as u32, "w {w} luma {v}");
+            }
+            let pixels: Vec<u8> = (0..4 * 300u32).map(|i| (i * 97 + i / 7) as u8).collect();
+            let mut planes = Vec::new();
+            for format in [
+                PixelFormat::Rgb8,
+                PixelFormat::Bgr8,
+                PixelFormat::Rgba8,
+                PixelFormat::Bgra8,
+            ] {
+                let c = format.channels();
+                for n in (0..40).chain([255, 300]) {
+                    let src = &pixels[..n * c];
+                    let (mut want, mut got) = (vec![0; n * c], vec![0; n * c]);
+                    m.row(format, src, &mut want);
+                    m.row_in(format, src, &mut got, &mut planes);
+                    assert_eq!(got, want, "w {w} {format} {n} pixels");
+                }
+            }
+        }
+        for r in 0..=255u32 {
+            for g in 0..=255u32 {
+                for b in 0..=255u32 {
+                    let hi = r * 76 + g * 150 + b * 29;
+                    let lo = r * 139 + g * 70 + b * 47;
+                    let y = (hi + (lo >> 8) + 128) >> 8;
+                    assert_eq!(y, crate::image::luma(r as u8, g as u8, b as u8) as u32);
+                }
+            }
+        }
     }
 
     #[test]
