@@ -363,15 +363,28 @@ wide_fn! {
 }
 
 wide_fn! {
-    /// JFIF YCbCr (chroma already without its 128 offset) to RGB bytes, one plane each.
-    fn ycc_to_rgb(y: &[f32], u: &[f32], v: &[f32], r: &mut [u8], g: &mut [u8], b: &mut [u8]) {
+    /// JFIF YCbCr (chroma already without its 128 offset) to RGB bytes, one plane each in
+    /// `planes` (3 `y.len()` bytes), merged into the row `dst` of `format` pixels (alpha left as
+    /// it is).
+    fn ycc_to_rgb(
+        y: &[f32],
+        u: &[f32],
+        v: &[f32],
+        planes: &mut [u8],
+        format: PixelFormat,
+        dst: &mut [u8],
+    ) {
+        let w = y.len();
+        let (r, rest) = planes.split_at_mut(w);
+        let (g, b) = rest.split_at_mut(w);
         let yuv = y.iter().zip(u).zip(v);
-        for (((((&y, &u), &v), pr), pg), pb) in yuv.zip(r).zip(g).zip(b) {
+        for (((((&y, &u), &v), pr), pg), pb) in yuv.zip(&mut *r).zip(&mut *g).zip(&mut *b) {
             let yy = y + 0.5;
             *pr = byte(yy + 1.402 * v);
             *pg = byte(yy - 0.344_136 * u - 0.714_136 * v);
             *pb = byte(yy + 1.772 * u);
         }
+        merge_rgb(format, [&*r, &*g, &*b], dst);
     }
 }
 
@@ -583,10 +596,7 @@ impl Bands {
             upsample_row(&self.t, out);
         }
         let yrow = &self.y[(r / BAND_ROWS) % 2][(r % BAND_ROWS) * at.pw..][..w];
-        let (p0, rest) = self.planes.split_at_mut(w);
-        let (p1, p2) = rest.split_at_mut(w);
-        ycc_to_rgb(yrow, u, v, p0, p1, p2);
-        merge_rgb(input.format, [&*p0, &*p1, &*p2], dst);
+        ycc_to_rgb(yrow, u, v, &mut self.planes, input.format, dst);
         copy_alpha(input.format, input.row(r), dst);
     }
 }
