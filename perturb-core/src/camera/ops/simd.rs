@@ -36,8 +36,9 @@ pub fn force_baseline(on: bool) {
 /// time instead of four (the baseline, `x86-64-v2`, has 128-bit vectors only). Both copies compute
 /// the same values: Rust never fuses a multiply and an add by itself or reorders float
 /// arithmetic, so wider instructions change only how many lanes run at once; a test compares the
-/// two paths on every camera perturbation. Calling the AVX2 copy is the crate's one `unsafe`
-/// operation, sound because the features are checked first.
+/// two paths on every camera perturbation. Calling the AVX2 copy is `unsafe`, sound because the
+/// features are checked first. (Kernels the compiler does not vectorise well from plain Rust are
+/// written with intrinsics instead: `camera/ops/transpose.rs`, `camera/pointwise/avx2.rs`.)
 ///
 /// Meant for kernels that run per row or per band (the check is a few cached loads per call).
 /// Functions the body calls get the wider code only where they are inlined into it. Closures in
@@ -59,7 +60,7 @@ macro_rules! wide_fn {
             #[inline(always)]
             fn base $(<$(const $cg: $ct),+>)? ($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
-            // The crate's one unsafe operation: the SIMD dispatch.
+            // Unsafe: calling the AVX2 copy (the features are checked first).
             #[allow(unsafe_code)]
             if $crate::camera::ops::wide_available() {
                 // SAFETY: the CPU has every feature the copy is compiled for (`wide_available`
