@@ -8,7 +8,7 @@ use crate::image::{ImageView, ImageViewMut};
 use crate::rng::Rng;
 
 /// The HSV value scaled by a factor and truncated, `V' = min(255, floor(V f))`, hue and
-/// saturation kept: what [`super::ops::map_value`] computes with that table, in float planes (see
+/// saturation kept: what [`crate::camera::ops::map_value`] computes with that table, in float planes (see
 /// [`scale_value`]; the same bytes).
 pub struct ValueScale {
     factor: f32,
@@ -44,7 +44,7 @@ fn value_lut(f: f32) -> [u8; 256] {
 }
 
 /// C-C4 brightness_increase: over-exposure, HSV `V <- min(255, V f)` truncated as the reference's
-/// uint8 write, hue and saturation kept (computed in RGB, see [`super::ops::map_value`]).
+/// uint8 write, hue and saturation kept (computed in RGB, see [`crate::camera::ops::map_value`]).
 pub const BRIGHTNESS_UP: CameraBuilder =
     |s| Ok(Box::new(ValueScale::new(BRIGHTNESS_INCREASE[s.level()])));
 

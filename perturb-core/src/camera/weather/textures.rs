@@ -160,7 +160,7 @@ pub fn snow_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
 
 /// C-C1 frost / C-C2 snow: a static procedural texture T blended over the frame,
 /// `out = (1 - i) I + i T`, then HSV saturation x 0.8 as the reference does after its blend
-/// (see [`super::ops::map_saturation`]; mono8 skips that step). The texture is generated once per
+/// (see [`crate::camera::ops::map_saturation`]; mono8 skips that step). The texture is generated once per
 /// (seed, resolution) at configuration time; the references stretch a photo (frost) or a
 /// sprite sheet (snow) instead, which the project does not ship.
 pub struct TextureOverlay {
