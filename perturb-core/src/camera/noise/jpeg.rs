@@ -2,7 +2,7 @@
 
 use crate::camera::ops::{
     Block, byte, copy_alpha, frame_buffer_overwritten, merge_rgb, par_rows, recycle, split_rgb,
-    transpose_blocks, wide_fn,
+    three_planes, transpose_blocks, wide_fn,
 };
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
@@ -275,9 +275,7 @@ wide_fn! {
         cr: &mut [f32],
     ) {
         let w = y.len();
-        let (r, rest) = work.split_at_mut(w);
-        let (g, b) = rest.split_at_mut(w);
-        let b = &mut b[..w];
+        let [r, g, b] = three_planes(work, w);
         split_rgb(src, format, [&mut *r, &mut *g, &mut *b]);
         let luma = |r: f32, g: f32, b: f32| 0.299 * r + 0.587 * g + 0.114 * b;
         let blue = |r: f32, g: f32, b: f32| -0.168_736 * r - 0.331_264 * g + 0.5 * b;
@@ -375,8 +373,7 @@ wide_fn! {
         dst: &mut [u8],
     ) {
         let w = y.len();
-        let (r, rest) = planes.split_at_mut(w);
-        let (g, b) = rest.split_at_mut(w);
+        let [r, g, b] = three_planes(planes, w);
         let yuv = y.iter().zip(u).zip(v);
         for (((((&y, &u), &v), pr), pg), pb) in yuv.zip(&mut *r).zip(&mut *g).zip(&mut *b) {
             let yy = y + 0.5;

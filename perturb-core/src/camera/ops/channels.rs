@@ -46,6 +46,22 @@ pub fn pad_row_copy<T: Copy>(src: &[T], c: usize, r: usize, dst: &mut [T]) {
     }
 }
 
+/// The first three `w`-long planes of `buf`: the red, green and blue planes of a row's scratch
+/// buffer (at least `3 w` long).
+///
+/// ```
+/// # use perturb_core::camera::ops::three_planes;
+/// let mut buf = [0u8, 1, 2, 3, 4, 5, 6];
+/// let [r, g, b] = three_planes(&mut buf, 2);
+/// assert_eq!((&*r, &*g, &*b), (&[0, 1][..], &[2, 3][..], &[4, 5][..]));
+/// ```
+#[inline(always)]
+pub fn three_planes<T>(buf: &mut [T], w: usize) -> [&mut [T]; 3] {
+    let (r, rest) = buf.split_at_mut(w);
+    let (g, rest) = rest.split_at_mut(w);
+    [r, g, &mut rest[..w]]
+}
+
 /// Splits a row of colour pixels of `format` into three planes of floats, red, green and blue
 /// (mono8: the grey value in all three). Each format gets its own loop with the channel positions
 /// known at compile time, which lets the compiler vectorise it.

@@ -1,6 +1,6 @@
 //! OpenCV's 8-bit HSV conversion and the value and saturation maps built on it.
 
-use super::channels::{copy_alpha, merge_rgb, split_rgb_bytes};
+use super::channels::{copy_alpha, merge_rgb, split_rgb_bytes, three_planes};
 use super::rows::{par_rows, par_rows_with};
 use super::simd::wide_fn;
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
@@ -272,8 +272,7 @@ wide_fn! {
     /// stride-3 loops, which vectorise far better in the AVX2 copy.)
     fn saturation_planar(m: f32, format: PixelFormat, src: &[u8], planes: &mut [u8], dst: &mut [u8]) {
         let w = planes.len() / 3;
-        let (r, rest) = planes.split_at_mut(w);
-        let (g, b) = rest.split_at_mut(w);
+        let [r, g, b] = three_planes(planes, w);
         split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
         saturation_planes(m, r, g, b);
         merge_rgb(format, [&*r, &*g, &*b], dst);

@@ -1,7 +1,7 @@
 //! Blends across channels: C-F1's channel mixes, C-F5's blend towards the luma, C-F4's gain blend.
 
 use super::bytemap::{fit_fixed, fit_fixed_near};
-use crate::camera::ops::{copy_alpha, merge_rgb, split_rgb_bytes, wide_fn};
+use crate::camera::ops::{copy_alpha, merge_rgb, split_rgb_bytes, three_planes, wide_fn};
 use crate::image::PixelFormat;
 
 /// The three channel permutations and two arithmetic mixes of C-F1 false colour, on the
@@ -223,8 +223,7 @@ wide_fn! {
         dst: &mut [u8],
     ) {
         let w = planes.len() / 3;
-        let (r, rest) = planes.split_at_mut(w);
-        let (g, b) = rest.split_at_mut(w);
+        let [r, g, b] = three_planes(planes, w);
         split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
         let done = super::avx2::luma_blend_planes(narrow.0, narrow.1, r, g, b);
         let rest = r[done..].iter_mut().zip(&mut g[done..]).zip(&mut b[done..]);

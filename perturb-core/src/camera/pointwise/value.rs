@@ -1,7 +1,9 @@
 //! HSV value scaling with exact rounding, per colour channel.
 
 use super::bytemap::ByteMap;
-use crate::camera::ops::{copy_alpha, merge_rgb, par_rows_with, split_rgb_bytes, wide_fn};
+use crate::camera::ops::{
+    copy_alpha, merge_rgb, par_rows_with, split_rgb_bytes, three_planes, wide_fn,
+};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
 
 /// `p nv / v` for a channel `p <= v` scaled by `nv / v`, plus `offset`, in float; [`nearest`]
@@ -53,8 +55,7 @@ wide_fn! {
     /// One row of [`scale_value`]; `planes` holds three byte planes of the row's width.
     fn scale_value_row(format: PixelFormat, f: f32, src: &[u8], planes: &mut [u8], dst: &mut [u8]) {
         let w = planes.len() / 3;
-        let (r, rest) = planes.split_at_mut(w);
-        let (g, b) = rest.split_at_mut(w);
+        let [r, g, b] = three_planes(planes, w);
         split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
         for ((r, g), b) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
             let v8 = (*r).max(*g).max(*b);
