@@ -197,7 +197,8 @@ impl CameraPerturbation for WhiteBalance {
         });
         // The tables as fixed-point arithmetic where that gives their bytes (checked per frame).
         if let Some(fast) = GainBlend::fit(gains, w, &luts) {
-            return par_rows(input, output, |_, src, dst| fast.row(format, src, dst));
+            let rows = fast.rows(format);
+            return par_rows(input, output, |_, src, dst| rows.row(src, dst));
         }
         par_rows(input, output, |_, src, dst| {
             for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {

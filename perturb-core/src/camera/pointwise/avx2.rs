@@ -133,6 +133,151 @@ fn luma_blend_planes_avx2(
     n
 }
 
+/// Sums of the bytes of `src` at each position modulo `C` (3 or 4: the pixels' channels) over
+/// its whole blocks of `32 C` bytes, and the bytes summed; the caller sums the rest. Each 32-byte
+/// vector is summed whole and with all but one channel masked off by `vpsadbw`, eight bytes into
+/// a 64-bit lane (no overflow on any row); the last channel is the whole minus the others.
+pub(super) fn channel_byte_sums<const C: usize>(src: &[u8]) -> ([u64; 4], usize) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::camera::ops::wide_available() {
+        // SAFETY: the CPU has AVX2 (`wide_available` checked it).
+        return unsafe { channel_byte_sums_avx2::<C>(src) };
+    }
+    let _ = src;
+    ([0; 4], 0)
+}
+
+/// `masks[j][k]`: 0xff where byte `i` of block `j` (byte `32 j + i` of a run of pixels of `C`
+/// bytes) is channel `k`, 0 elsewhere.
+const fn channel_masks<const C: usize>() -> [[[u8; 32]; 3]; C] {
+    let mut masks = [[[0u8; 32]; 3]; C];
+    let mut i = 0;
+    while i < 32 * C {
+        if i % C < 3 {
+            masks[i / 32][i % C][i % 32] = 0xff;
+        }
+        i += 1;
+    }
+    masks
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn channel_byte_sums_avx2<const C: usize>(src: &[u8]) -> ([u64; 4], usize) {
+    // Masks for channels 0 and 1 (and 2 with alpha) per block, the last colour channel from
+    // the whole sum.
+    let masks: [[__m256i; 3]; C] = const { channel_masks::<C>() }.map(|block| {
+        // SAFETY: each mask is 32 bytes, the size of the unaligned load.
+        block.map(|m| unsafe { _mm256_loadu_si256(m.as_ptr().cast()) })
+    });
+    let zero = _mm256_setzero_si256();
+    let mut whole = zero;
+    let mut parts = [zero; 3];
+    let mut n = 0;
+    for block in src.chunks_exact(32 * C) {
+        for (j, chunk) in block.chunks_exact(32).enumerate() {
+            // SAFETY: `chunk` is 32 bytes, the size of the unaligned load.
+            let x = unsafe { _mm256_loadu_si256(chunk.as_ptr().cast()) };
+            whole = _mm256_add_epi64(whole, _mm256_sad_epu8(x, zero));
+            for (k, part) in parts.iter_mut().enumerate().take(C - 1) {
+                let masked = _mm256_and_si256(x, masks[j][k]);
+                *part = _mm256_add_epi64(*part, _mm256_sad_epu8(masked, zero));
+            }
+        }
+        n += 32 * C;
+    }
+    let total = |v: __m256i| {
+        let mut lanes = [0u64; 4];
+        // SAFETY: `lanes` is 32 bytes, the size of the unaligned store.
+        unsafe { _mm256_storeu_si256(lanes.as_mut_ptr().cast(), v) };
+        lanes.iter().sum::<u64>()
+    };
+    let mut sums = [0u64; 4];
+    for k in 0..C - 1 {
+        sums[k] = total(parts[k]);
+    }
+    sums[C - 1] = total(whole) - sums[..C - 1].iter().sum::<u64>();
+    (sums, n)
+}
+
+/// The constants of [`gain_blend`]'s 16-bit lanes: for each of the (at most four) 32-byte
+/// vectors of a block and each of its two unpacked halves, five vectors of 16 lanes: the gain's
+/// integer multiplier, its fraction multiplier, the carry threshold (see [`gain_lanes`]), the
+/// blend's weight and offset.
+pub(super) type GainLanes = [[[u16; 16]; 5]; 8];
+
+/// [`GainLanes`] for pixels of `c` bytes from the constants of each byte of a pixel:
+/// `at(i) = [gain >> 16, gain & 0xffff, gain offset, blend weight, blend offset]` for byte `i`.
+/// The gain offset becomes the threshold `(0xffff - offset) ^ 0x8000` that the low product,
+/// its top bit flipped, exceeds (signed) exactly when adding the offset carries.
+pub(super) fn gain_lanes(c: usize, at: impl Fn(usize) -> [u16; 5]) -> GainLanes {
+    std::array::from_fn(|half| {
+        let (vector, high) = (half / 2, half % 2 == 1);
+        // Lane `l` of an unpacked half holds byte `l` (low) or `l + 8` (high) of its 128-bit
+        // lane: bytes 0-7 and 16-23 in the low half, 8-15 and 24-31 in the high one.
+        let byte = |l: usize| 32 * vector + (l / 8) * 16 + l % 8 + if high { 8 } else { 0 };
+        let mut lanes = [[0u16; 16]; 5];
+        for l in 0..16 {
+            let [a, f, offset, w, k] = at(byte(l) % c);
+            let threshold = (0xffff - offset) ^ 0x8000;
+            for (lane, x) in lanes.iter_mut().zip([a, f, threshold, w, k]) {
+                lane[l] = x;
+            }
+        }
+        lanes
+    })
+}
+
+/// [`super::GainBlend`]'s 16-bit lanes over the whole `32 C`-byte blocks (`C` bytes per pixel)
+/// of `src`, 32 bytes at a time as two halves of 16 lanes; returns the bytes written. Each lane
+/// computes [`super::narrow_byte`] with its byte's constants in `lanes`.
+pub(super) fn gain_blend<const C: usize>(lanes: &GainLanes, src: &[u8], dst: &mut [u8]) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if crate::camera::ops::wide_available() {
+        // SAFETY: the CPU has AVX2 (`wide_available` checked it).
+        return unsafe { gain_blend_avx2::<C>(lanes, src, dst) };
+    }
+    let _ = (lanes, src, dst);
+    0
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn gain_blend_avx2<const C: usize>(lanes: &GainLanes, src: &[u8], dst: &mut [u8]) -> usize {
+    // SAFETY: each lane array is 32 bytes, the size of the unaligned load.
+    let load = |x: &[u16; 16]| unsafe { _mm256_loadu_si256(x.as_ptr().cast()) };
+    let consts: [[__m256i; 5]; 8] = std::array::from_fn(|h| lanes[h].each_ref().map(load));
+    let zero = _mm256_setzero_si256();
+    let top = _mm256_set1_epi16(255);
+    let sign = _mm256_set1_epi16(i16::MIN);
+    let half = |v: __m256i, [a, f, threshold, w, k]: [__m256i; 5]| {
+        let low = _mm256_mullo_epi16(v, f);
+        let whole = _mm256_add_epi16(_mm256_mullo_epi16(v, a), mulhi_epu16(v, f));
+        // -1 where the low product plus the gain offset carries.
+        let carry = _mm256_cmpgt_epi16(_mm256_xor_si256(low, sign), threshold);
+        let balanced = _mm256_min_epu16(_mm256_sub_epi16(whole, carry), top);
+        let d = _mm256_slli_epi16::<6>(_mm256_sub_epi16(balanced, v));
+        let step = _mm256_srai_epi16::<5>(_mm256_add_epi16(mulhi_epi16(d, w), k));
+        _mm256_add_epi16(v, step)
+    };
+    let mut n = 0;
+    for (s, d) in src.chunks_exact(32 * C).zip(dst.chunks_exact_mut(32 * C)) {
+        for j in 0..C {
+            // SAFETY: `s` and `d` hold `32 C` bytes: the 32-byte load and store at `32 j` stay
+            // inside.
+            let x = unsafe { _mm256_loadu_si256(s.as_ptr().add(32 * j).cast()) };
+            let lo = half(_mm256_unpacklo_epi8(x, zero), consts[2 * j]);
+            let hi = half(_mm256_unpackhi_epi8(x, zero), consts[2 * j + 1]);
+            // Every lane is a byte value: the pack keeps it and undoes the unpacks' order.
+            let out = _mm256_packus_epi16(lo, hi);
+            // SAFETY: as the load.
+            unsafe { _mm256_storeu_si256(d.as_mut_ptr().add(32 * j).cast(), out) };
+        }
+        n += 32 * C;
+    }
+    n
+}
+
 /// Calls `f(x)` on each whole 32-byte block of `src` and stores its result in the same place of
 /// `dst`; returns the bytes written.
 #[cfg(target_arch = "x86_64")]
@@ -236,6 +381,26 @@ fn mulhi_epu16(a: __m256i, b: __m256i) -> __m256i {
     unsafe {
         std::arch::asm!(
             "vpmulhuw {o}, {a}, {b}",
+            o = lateout(ymm_reg) out,
+            a = in(ymm_reg) a,
+            b = in(ymm_reg) b,
+            options(pure, nomem, nostack, preserves_flags),
+        );
+    }
+    out
+}
+
+/// `_mm256_mulhi_epi16` (signed) as the one instruction it names, for the reason of
+/// [`mulhi_epu16`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn mulhi_epi16(a: __m256i, b: __m256i) -> __m256i {
+    let out;
+    // SAFETY: one AVX2 instruction on registers (the features are this function's), no memory.
+    unsafe {
+        std::arch::asm!(
+            "vpmulhw {o}, {a}, {b}",
             o = lateout(ymm_reg) out,
             a = in(ymm_reg) a,
             b = in(ymm_reg) b,

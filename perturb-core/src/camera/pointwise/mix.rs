@@ -238,9 +238,18 @@ wide_fn! {
 /// Per-colour-channel sums of a row of `c`-byte pixels (red, green, blue at `rgb`), vectorised:
 /// 16 pixels' bytes at a time into 32-bit lanes, folded per channel at the end.
 pub fn channel_sums(src: &[u8], c: usize, rgb: [usize; 3]) -> [u64; 3] {
+    // The whole blocks through `vpsadbw` where the CPU has AVX2, the rest in 32-bit lanes.
+    fn both<const C: usize, const N: usize>(src: &[u8]) -> [u64; 4] {
+        let (head, done) = super::avx2::channel_byte_sums::<C>(src);
+        if done == src.len() {
+            return head;
+        }
+        let rest = byte_sums::<C, N>(&src[done..]);
+        std::array::from_fn(|i| head[i] + rest[i])
+    }
     let sums = match c {
-        3 => byte_sums::<3, 48>(src),
-        4 => byte_sums::<4, 64>(src),
+        3 => both::<3, 48>(src),
+        4 => both::<4, 64>(src),
         _ => {
             let s: u64 = src.iter().map(|&v| v as u64).sum();
             return [s; 3];
@@ -285,6 +294,11 @@ wide_fn! {
 /// C-F4's per-channel tables `out = round((1 - w) v + w min(255, floor(v g)))` computed as
 /// `b = min(255, (v gm + ga) >> 16)` and `out = (v w1 + b w2 + add) >> 16`, per channel, when
 /// that gives every table entry (checked; `None` otherwise).
+///
+/// Where the CPU has AVX2 the rows run in 16-bit lanes: the gain's 16.16 product split into an
+/// integer and a fraction part (`a v + mulhi(v, f)` plus the carry of the low product and `ga`,
+/// the same value), and the blend as `v + ((mulhi(64 (b - v), W) + K) >> 5)`, `W` and `K` fitted
+/// per channel to the table (see [`narrow_byte`]; without a fit the 32-bit form runs).
 #[derive(Clone, Copy, Debug)]
 pub struct GainBlend {
     /// Per channel (in the order red, green, blue): gain multiplier and offset.
@@ -293,6 +307,8 @@ pub struct GainBlend {
     w: (u32, u32),
     /// Per channel: the rounding offset of the blend.
     add: [u32; 3],
+    /// Per channel: the 16-bit blend's weight and offset, where one gives the table.
+    narrow: Option<[(i16, i16); 3]>,
 }
 
 impl GainBlend {
@@ -322,39 +338,96 @@ impl GainBlend {
             }
             add[k] = lo as u32;
         }
+        let narrow = (0..3)
+            .map(|k| fit_narrow_blend(gain[k], w, &luts[k]))
+            .collect::<Option<Vec<_>>>()
+            .map(|n| [n[0], n[1], n[2]]);
         Some(GainBlend {
             gain,
             w: (w1, w2),
             add,
+            narrow,
         })
     }
 
-    /// Balances one row of `format` pixels (a colour format; alpha copied).
-    pub fn row(&self, format: PixelFormat, src: &[u8], dst: &mut [u8]) {
+    /// Whether the rows run in 16-bit lanes where the CPU has AVX2 (a blend fitted every
+    /// channel's table).
+    pub fn is_narrow(&self) -> bool {
+        self.narrow.is_some()
+    }
+
+    /// The constants of each byte of a `format` pixel, for [`GainRows::row`].
+    pub fn rows(&self, format: PixelFormat) -> GainRows {
         let [ri, gi, bi] = format.rgb_offsets();
-        // The constants of each byte of a pixel: alpha passes through as `v w1 + v w2`, which
-        // the blend offset 2^15 rounds back to v (w1 + w2 is 2^16, give or take the weights'
-        // rounding).
-        let c = format.channels();
+        // Alpha passes through as `v w1 + v w2`, which the blend offset 2^15 rounds back to v
+        // (w1 + w2 is 2^16, give or take the weights' rounding); in 16-bit lanes as a gain of
+        // one and a blend of nothing.
         let mut at = [(65536u32, 0u32, 1u32 << 15); 4];
+        let mut narrow_at = [(65536u32, 0u32, 0i16, 0i16); 4];
         for (k, i) in [ri, gi, bi].into_iter().enumerate() {
             at[i] = (self.gain[k].0, self.gain[k].1, self.add[k]);
+            if let Some(n) = self.narrow {
+                narrow_at[i] = (self.gain[k].0, self.gain[k].1, n[k].0, n[k].1);
+            }
         }
+        let c = format.channels();
+        let lanes = self.narrow.filter(|_| c >= 3).map(|_| {
+            Box::new(super::avx2::gain_lanes(c, |i| {
+                let (gm, ga, w, k) = narrow_at[i];
+                [(gm >> 16) as u16, gm as u16, ga as u16, w as u16, k as u16]
+            }))
+        });
+        GainRows {
+            at,
+            w: self.w,
+            c,
+            lanes,
+        }
+    }
+}
+
+/// A [`GainBlend`] ready for the rows of one pixel format.
+#[derive(Clone, Debug)]
+pub struct GainRows {
+    /// Per byte of a pixel: gain multiplier, gain offset, blend offset.
+    at: [(u32, u32, u32); 4],
+    /// Weights of the input and of the balanced value.
+    w: (u32, u32),
+    /// Bytes per pixel.
+    c: usize,
+    /// The 16-bit lanes' constants, where the blend fitted.
+    lanes: Option<Box<super::avx2::GainLanes>>,
+}
+
+impl GainRows {
+    /// Balances one row of pixels (a colour format; alpha copied).
+    pub fn row(&self, src: &[u8], dst: &mut [u8]) {
+        let c = self.c;
         if !(65535..=65537).contains(&(self.w.0 + self.w.1)) {
             // Alpha would not pass through: weights that do not sum to one (not C-F4's).
-            return self.row_by_pixel(c, &at, src, dst);
+            return self.row_by_pixel(src, dst);
+        }
+        let done = match (&self.lanes, c) {
+            (Some(lanes), 3) => super::avx2::gain_blend::<3>(lanes, src, dst),
+            (Some(lanes), 4) => super::avx2::gain_blend::<4>(lanes, src, dst),
+            _ => 0,
+        };
+        let (src, dst) = (&src[done..], &mut dst[done..]);
+        if src.is_empty() {
+            return;
         }
         match c {
-            3 => gain_blend::<48>(std::array::from_fn(|i| at[i % 3]), self.w, src, dst),
-            4 => gain_blend::<64>(std::array::from_fn(|i| at[i % 4]), self.w, src, dst),
+            3 => gain_blend::<48>(std::array::from_fn(|i| self.at[i % 3]), self.w, src, dst),
+            4 => gain_blend::<64>(std::array::from_fn(|i| self.at[i % 4]), self.w, src, dst),
             _ => dst.copy_from_slice(src),
         }
     }
 
-    fn row_by_pixel(&self, c: usize, at: &[(u32, u32, u32); 4], src: &[u8], dst: &mut [u8]) {
+    fn row_by_pixel(&self, src: &[u8], dst: &mut [u8]) {
+        let c = self.c;
         for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact_mut(c)) {
             for i in 0..3 {
-                q[i] = gain_blend_byte(p[i], at[i], self.w);
+                q[i] = gain_blend_byte(p[i], self.at[i], self.w);
             }
             if c == 4 {
                 q[3] = p[3];
@@ -368,6 +441,49 @@ fn gain_blend_byte(v: u8, (gm, ga, add): (u32, u32, u32), (w1, w2): (u32, u32)) 
     let v = v as u32;
     let b = ((v * gm + ga) >> 16).min(255);
     ((v * w1 + b * w2 + add) >> 16) as u8
+}
+
+/// The 16-bit lanes' byte: the balanced value `b = min(255, (v gm + ga) >> 16)` (what the lanes
+/// compute as `(gm >> 16) v + mulhi(v, gm & 0xffff)` plus a carry), then the blend
+/// `v + ((mulhi(64 (b - v), w) + k) >> 5)` with the signed 16-bit multiply-high
+/// `mulhi(x, w) = floor(x w / 2^16)`, that is `v + floor((b - v) w / 2^15 + k / 32)`.
+pub fn narrow_byte(v: u8, (gm, ga): (u32, u32), (w, k): (i16, i16)) -> u8 {
+    let v = v as i32;
+    let b = ((v as u32 * gm + ga) >> 16).min(255) as i32;
+    let high = (64 * (b - v) * w as i32) >> 16;
+    (v + ((high + k as i32) >> 5)) as u8
+}
+
+/// The 16-bit blend `(w, k)` of [`narrow_byte`] that gives `lut` for the gain `gain`, searched
+/// near `w 2^15`: for each weight every entry bounds `k` from both sides.
+fn fit_narrow_blend(gain: (u32, u32), w: f64, lut: &[u8; 256]) -> Option<(i16, i16)> {
+    let w0 = (w * 32768.0).round() as i32;
+    let pairs: [(i32, i32); 256] = std::array::from_fn(|v| {
+        let b = ((v as u32 * gain.0 + gain.1) >> 16).min(255) as i32;
+        (b - v as i32, lut[v] as i32 - v as i32)
+    });
+    for step in 0..=16 {
+        for weight in [w0 - step, w0 + step] {
+            if !(0..=32767).contains(&weight) || (step == 0 && weight != w0) {
+                continue;
+            }
+            // floor((high + k) / 32) == want  <=>  32 want - high <= k <= 32 want + 31 - high
+            let (mut lo, mut hi) = (-1024, 1024);
+            for &(d, want) in &pairs {
+                let high = (64 * d * weight) >> 16;
+                lo = lo.max(32 * want - high);
+                hi = hi.min(32 * want + 31 - high);
+            }
+            if lo <= hi {
+                let fit = (weight as i16, lo as i16);
+                // The bound is exact; checked once more on the bytes themselves.
+                if (0..=255u8).all(|v| narrow_byte(v, gain, fit) == lut[v as usize]) {
+                    return Some(fit);
+                }
+            }
+        }
+    }
+    None
 }
 
 wide_fn! {
@@ -418,7 +534,7 @@ mod tests {
             }
         }
         // White balance: gains from dark to bright channels, every weight.
-        let mut fitted = 0;
+        let (mut fitted, mut narrow) = (0, 0);
         for w in crate::camera::color::WHITE_BALANCE_WEIGHT.map(|w| w as f64) {
             for gains in [
                 [1.0, 1.0, 1.0],
@@ -436,21 +552,35 @@ mod tests {
                     continue;
                 };
                 fitted += 1;
+                narrow += m.is_narrow() as usize;
                 for format in [PixelFormat::Rgb8, PixelFormat::Bgra8] {
                     let c = format.channels();
-                    let src: Vec<u8> = (0..256 * c).map(|i| (i / c) as u8).collect();
-                    let mut dst = vec![0; src.len()];
-                    m.row(format, &src, &mut dst);
-                    let [ri, gi, bi] = format.rgb_offsets();
-                    for (v, q) in dst.chunks_exact(c).enumerate() {
-                        let got = [q[ri], q[gi], q[bi]];
-                        let want = [luts[0][v], luts[1][v], luts[2][v]];
-                        assert_eq!(got, want, "w {w} gains {gains:?} v {v} {format}");
+                    let rows = m.rows(format);
+                    // Every value at every place of a 32-pixel block, and rows whose tails
+                    // are not whole blocks; alpha is kept.
+                    for px in [256 + 32 * 31, 256 + 7, 31] {
+                        let src: Vec<u8> =
+                            (0..px * c).map(|i| (i / c + i / (32 * c)) as u8).collect();
+                        let mut dst = vec![0; src.len()];
+                        rows.row(&src, &mut dst);
+                        let [ri, gi, bi] = format.rgb_offsets();
+                        for (p, q) in src.chunks_exact(c).zip(dst.chunks_exact(c)) {
+                            let got = [q[ri], q[gi], q[bi]];
+                            let want = [0, 1, 2].map(|k| luts[k][p[[ri, gi, bi][k]] as usize]);
+                            assert_eq!(got, want, "w {w} gains {gains:?} {p:?} {format}");
+                            if c == 4 {
+                                assert_eq!(q[3], p[3], "alpha");
+                            }
+                        }
                     }
                 }
             }
         }
         assert!(fitted >= 15, "only {fitted} of 20 white balances fitted");
+        assert_eq!(
+            narrow, fitted,
+            "the 16-bit blend fitted {narrow} of {fitted}"
+        );
     }
 
     #[test]
@@ -499,11 +629,19 @@ mod tests {
 
     #[test]
     fn channel_sums_match_a_plain_sum() {
-        let row: Vec<u8> = (0..4 * 301).map(|i| (i * 37 % 256) as u8).collect();
-        for (c, rgb) in [(3, [0, 1, 2]), (3, [2, 1, 0]), (4, [2, 1, 0])] {
-            let n = row.len() / c * c;
-            let want: [u64; 3] = rgb.map(|o| row[..n].chunks_exact(c).map(|p| p[o] as u64).sum());
-            assert_eq!(channel_sums(&row[..n], c, rgb), want, "{c} {rgb:?}");
+        // Every length from none to several whole blocks (of 32 pixels) and a tail; a row of
+        // 255s too (the widest sums).
+        let mixed: Vec<u8> = (0..4 * 301).map(|i| (i * 37 % 256) as u8).collect();
+        let white = vec![255u8; 4 * 301];
+        for row in [mixed, white] {
+            for (c, rgb) in [(3, [0, 1, 2]), (3, [2, 1, 0]), (4, [2, 1, 0])] {
+                for px in 0..=301 {
+                    let row = &row[..px * c];
+                    let want: [u64; 3] =
+                        rgb.map(|o| row.chunks_exact(c).map(|p| p[o] as u64).sum());
+                    assert_eq!(channel_sums(row, c, rgb), want, "{c} {rgb:?} {px} pixels");
+                }
+            }
         }
     }
 }
