@@ -62,8 +62,8 @@ pub(super) fn steps(src: &[u8], dst: &mut [u8], levels: u16, scale: u16) -> usiz
     0
 }
 
-/// C-F5's blend ([`super::LumaBlend`]) over byte planes of red, green and blue, in place, 16
-/// pixels at a time in 16-bit lanes; returns the pixels written. The luma is
+/// C-F5's blend ([`super::LumaBlend`]) over byte planes of red, green and blue, in place, 32
+/// pixels at a time as two halves of 16-bit lanes; returns the pixels written. The luma is
 /// `(hi + (lo >> 8) + 128) >> 8` with `hi` and `lo` the sums of the channels times the high and
 /// low bytes of BT.601's 16-bit weights (exactly `luma`'s rounding: a test checks every colour).
 pub(super) fn luma_blend_planes(
@@ -92,21 +92,22 @@ fn luma_blend_planes_avx2(
     b: &mut [u8],
 ) -> usize {
     let splat = |v: u16| _mm256_set1_epi16(v as i16);
-    let (ka, kb, la, lb) = (splat(keep.a), splat(keep.b), splat(luma.a), splat(luma.b));
+    let (ka, kb, la, lb) = (
+        splat(keep.a),
+        splat(keep.b / 2),
+        splat(luma.a),
+        splat(luma.b / 2),
+    );
     let [r_hi, g_hi, b_hi] = [76, 150, 29].map(splat);
     let [r_lo, g_lo, b_lo] = [139, 70, 47].map(splat);
     let c128 = splat(128);
-    // `a v + ((b v + 2^15) >> 16)`: the carry of the rounding is the low product's top bit.
-    let split = |v: __m256i, a: __m256i, b: __m256i| {
-        let low = _mm256_mullo_epi16(v, b);
-        let whole = _mm256_add_epi16(_mm256_mullo_epi16(v, a), mulhi_epu16(v, b));
-        _mm256_add_epi16(whole, _mm256_srli_epi16::<15>(low))
+    let zero = _mm256_setzero_si256();
+    // `a v + ((b v + 2^15) >> 16)` with `b` even: the fraction by the rounding multiply-high.
+    let split = |v: __m256i, a: __m256i, half_b: __m256i| {
+        _mm256_add_epi16(_mm256_mullo_epi16(v, a), _mm256_mulhrs_epi16(v, half_b))
     };
-    let n = r.len().min(g.len()).min(b.len()) / 16 * 16;
-    for i in (0..n).step_by(16) {
-        // SAFETY: `i + 16 <= n`, within each plane: the 16-byte loads and stores stay inside.
-        let [rv, gv, bv] = [&*r, &*g, &*b]
-            .map(|p| unsafe { _mm256_cvtepu8_epi16(_mm_loadu_si128(p.as_ptr().add(i).cast())) });
+    // Sixteen pixels in 16-bit lanes: the three blended channels.
+    let blend = |[rv, gv, bv]: [__m256i; 3]| {
         let mul_add3 = |x: __m256i, y: __m256i, z: __m256i| {
             let sum = _mm256_add_epi16(_mm256_mullo_epi16(rv, x), _mm256_mullo_epi16(gv, y));
             _mm256_add_epi16(sum, _mm256_mullo_epi16(bv, z))
@@ -116,18 +117,22 @@ fn luma_blend_planes_avx2(
         let y = _mm256_add_epi16(_mm256_add_epi16(hi, c128), _mm256_srli_epi16::<8>(lo));
         let y = _mm256_srli_epi16::<8>(y);
         let ly = _mm256_add_epi16(split(y, la, lb), c128);
-        for (plane, v) in [(&mut *r, rv), (&mut *g, gv), (&mut *b, bv)] {
-            let out = _mm256_srli_epi16::<8>(_mm256_add_epi16(split(v, ka, kb), ly));
-            // At most 255 per lane: the pack keeps it; the two 64-bit halves that hold the 16
-            // bytes moved to the low 128 bits.
-            let bytes = _mm256_permute4x64_epi64::<0x08>(_mm256_packus_epi16(out, out));
+        [rv, gv, bv].map(|v| _mm256_srli_epi16::<8>(_mm256_add_epi16(split(v, ka, kb), ly)))
+    };
+    let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
+    for i in (0..n).step_by(32) {
+        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
+        let x = [&*r, &*g, &*b].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
+        let lo = blend(x.map(|v| _mm256_unpacklo_epi8(v, zero)));
+        let hi = blend(x.map(|v| _mm256_unpackhi_epi8(v, zero)));
+        for (plane, (lo, hi)) in [&mut *r, &mut *g, &mut *b]
+            .into_iter()
+            .zip(lo.into_iter().zip(hi))
+        {
+            // At most 255 per lane: the pack keeps it and undoes the unpacks' order.
+            let bytes = _mm256_packus_epi16(lo, hi);
             // SAFETY: as the loads.
-            unsafe {
-                _mm_storeu_si128(
-                    plane.as_mut_ptr().add(i).cast(),
-                    _mm256_castsi256_si128(bytes),
-                )
-            };
+            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
         }
     }
     n

@@ -106,9 +106,9 @@ pub struct LumaBlend {
 }
 
 /// A table `t[v] = a v + ((b v + 2^15) >> 16)` for every byte `v`: a slope with a 16-bit whole part
-/// and a 16-bit fraction, rounded once, which 16-bit lanes compute exactly (`a v` and the low half
-/// of `b v` by multiply-low, the high half by multiply-high, the rounding carry as the low half's
-/// top bit).
+/// and a 16-bit fraction, rounded once, with `b` even, which 16-bit lanes compute exactly in two
+/// multiplies: `a v` by multiply-low, and the rounded fraction by the rounding multiply-high
+/// `(v (b / 2) + 2^14) >> 15` (`vpmulhrsw`, signed: `b / 2` is below 2^15).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Split16 {
     /// Whole part of the slope.
@@ -118,7 +118,8 @@ pub struct Split16 {
 }
 
 impl Split16 {
-    /// The form of `table`, if it has one (searched around the table's mean slope).
+    /// The form of `table`, if it has one with an even `b` (searched around the table's mean
+    /// slope; every C-F5 table has many).
     pub fn fit(table: &[u16; 256]) -> Option<Self> {
         let slope = (table[255] as f64 - table[0] as f64) / 255.0;
         if !(0.0..256.0).contains(&slope) {
@@ -129,6 +130,7 @@ impl Split16 {
         (0..=4096)
             .flat_map(|d| [b0 - d, b0 + d])
             .filter_map(|b| u16::try_from(b).ok())
+            .filter(|b| b % 2 == 0)
             .map(|b| Split16 { a, b })
             .find(|f| (0..=255u8).all(|v| f.eval(v as u16) == table[v as usize] as u32))
     }
@@ -212,7 +214,7 @@ wide_fn! {
 }
 
 wide_fn! {
-    /// [`LumaBlend::row_in`]: the row split into the three byte planes of `planes`, blended 16
+    /// [`LumaBlend::row_in`]: the row split into the three byte planes of `planes`, blended 32
     /// pixels at a time in 16-bit lanes (the rest pixel by pixel), merged back; alpha copied.
     fn luma_blend_planar(
         m: LumaBlend,
