@@ -1,21 +1,23 @@
-//! Hand-written AVX2 copies of [`super::ByteMap`]'s forms, 32 bytes at a time, with the patched
-//! inputs blended in the same pass.
+//! Hand-written AVX2 kernels where the compiler's own vectorisation falls short: [`super::ByteMap`]'s
+//! forms 32 bytes at a time with the patched inputs blended in the same pass, C-F5's luma blend
+//! and C-F4's gain blend in 16-bit lanes, C-C4/C-C5's value scale in float lanes, and the
+//! per-channel sums of a row by `vpsadbw`.
 //!
-//! The compiler's own vectorisation of these loops falls short: it runs the line's 16-bit
-//! multiply-high in 32-bit lanes, and it cannot merge the patches into the loop of the form.
-//! These kernels spell the instructions out: for the line a byte widened to a 16-bit lane, one
-//! multiply-high, saturating adds, a shift and a saturating pack; for the mask one AND; for the
-//! 16-entry table one byte shuffle; then a compare and a blend per patch. They are integer
-//! arithmetic, so they give the bytes of the scalar definitions on every input (tests compare the
-//! two on every byte value, every tail length and the patches).
+//! The compiler runs a 16-bit multiply-high in 32-bit lanes when its multiplier is a broadcast
+//! made before the loop, cannot merge the patches into the loop of the form, and widens or
+//! shuffles more than the work needs. These kernels spell the instructions out. The integer ones
+//! give the bytes of the scalar definitions on every input; the float one gives the same exact
+//! roundings (tests compare each with its scalar code on every byte value or every colour pair
+//! that matters, every tail length and the patches).
 //!
-//! Each function handles the whole 32-byte blocks of a row and returns how many bytes it wrote;
-//! the caller finishes the tail with the scalar code. Without AVX2 (or with
+//! Each function handles the whole blocks of a row and returns how much it wrote; the caller
+//! finishes the tail with the scalar code. Without AVX2 (or with
 //! [`crate::camera::ops::force_baseline`] on) they write nothing and return 0.
 //!
-//! Unsafe code is allowed in this module for two things only: calling the AVX2 functions after
-//! the CPU was checked to have AVX2, and unaligned 32-byte loads and stores through pointers into
-//! slices of exactly 32 bytes.
+//! Unsafe code is allowed in this module for three things only: calling the AVX2 functions after
+//! the CPU was checked to have them, unaligned loads and stores through pointers that stay inside
+//! the slices they come from (each says why), and the multiply-high instructions written as
+//! `asm!` on registers.
 #![allow(unsafe_code)]
 
 #[cfg(target_arch = "x86_64")]
@@ -132,6 +134,60 @@ fn luma_blend_planes_avx2(
             // At most 255 per lane: the pack keeps it and undoes the unpacks' order.
             let bytes = _mm256_packus_epi16(lo, hi);
             // SAFETY: as the loads.
+            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
+        }
+    }
+    n
+}
+
+/// C-C4/C-C5's HSV value scale ([`super::scale_value`]) over byte planes of red, green and blue,
+/// in place, 32 pixels at a time in 8-lane float vectors; returns the pixels written (none for a
+/// factor `f` that is not finite). Each channel is `round(c k + NUDGE)` with `k = V' / max(V, 1)`
+/// as the scalar code computes it, the product and the sum fused: both roundings are exact (a
+/// test checks the fused form on every channel, value and new value), so the bytes are the
+/// scalar code's. A black pixel needs no case of its own here: with a finite factor its new
+/// value is 0, as every channel's.
+pub(super) fn value_scale_planes(f: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if crate::camera::ops::wide_available() && f.is_finite() {
+        // SAFETY: the CPU has AVX2 and FMA (`wide_available` checked them).
+        return unsafe { value_scale_planes_avx2(f, r, g, b) };
+    }
+    let _ = (f, r, g, b);
+    0
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn value_scale_planes_avx2(f: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) -> usize {
+    let f = _mm256_set1_ps(f);
+    let (top, one) = (_mm256_set1_ps(255.0), _mm256_set1_ps(1.0));
+    let nudge = _mm256_set1_ps(super::value::NUDGE);
+    let zero = _mm256_setzero_si256();
+    // The two packs leave the 4-byte groups of the four 8-pixel quarters interleaved by
+    // 128-bit half: this puts them back in order.
+    let order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+    let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
+    for i in (0..n).step_by(32) {
+        let mut out = [[zero; 4]; 3];
+        for (q, at) in (i..i + 32).step_by(8).enumerate() {
+            // SAFETY: `at + 8 <= n`, within each plane: the 8-byte loads stay inside.
+            let x = [&*r, &*g, &*b].map(|p| unsafe {
+                _mm256_cvtepu8_epi32(_mm_loadl_epi64(p.as_ptr().add(at).cast()))
+            });
+            let v = _mm256_cvtepi32_ps(_mm256_max_epi32(_mm256_max_epi32(x[0], x[1]), x[2]));
+            let nv = _mm256_floor_ps(_mm256_min_ps(_mm256_mul_ps(v, f), top));
+            let k = _mm256_div_ps(nv, _mm256_max_ps(v, one));
+            for (c, x) in x.into_iter().enumerate() {
+                let scaled = _mm256_fmadd_ps(_mm256_cvtepi32_ps(x), k, nudge);
+                out[c][q] = _mm256_cvtps_epi32(scaled);
+            }
+        }
+        for (plane, [o0, o1, o2, o3]) in [&mut *r, &mut *g, &mut *b].into_iter().zip(out) {
+            // At most 255 per lane: the saturating packs keep every value.
+            let words = [_mm256_packus_epi32(o0, o1), _mm256_packus_epi32(o2, o3)];
+            let bytes = _mm256_permutevar8x32_epi32(_mm256_packus_epi16(words[0], words[1]), order);
+            // SAFETY: `i + 32 <= n`, within the plane: the 32-byte store stays inside.
             unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
         }
     }

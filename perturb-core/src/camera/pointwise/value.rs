@@ -19,7 +19,7 @@ fn scale_channel(p: f32, k: f32, offset: f32) -> f32 {
 }
 
 /// What [`scale_channel`] adds to push exact halves up.
-const NUDGE: f32 = 1.0 / 4096.0;
+pub(super) const NUDGE: f32 = 1.0 / 4096.0;
 
 /// `x` in `[0, 255.5)` rounded to the nearest byte: adding 2^23 leaves no fraction in an f32's
 /// mantissa, so the low byte of the sum's bits is the rounded value. [`scale_channel`]'s values are
@@ -51,21 +51,27 @@ pub fn scale_value(input: &ImageView<'_>, output: &mut ImageViewMut<'_>, f: f32,
     );
 }
 
+/// One pixel of [`scale_value`]: `[r, g, b]` with its value scaled by `f`.
+#[inline(always)]
+fn scale_pixel(f: f32, [r, g, b]: [u8; 3]) -> [u8; 3] {
+    let v8 = r.max(g).max(b);
+    let v = v8 as f32;
+    let nv = (v * f).min(255.0).floor();
+    let k = nv / v.max(1.0);
+    let offset = if v8 == 0 { nv + NUDGE } else { NUDGE };
+    [r, g, b].map(|c| nearest(scale_channel(c as f32, k, offset)))
+}
+
 wide_fn! {
     /// One row of [`scale_value`]; `planes` holds three byte planes of the row's width.
     fn scale_value_row(format: PixelFormat, f: f32, src: &[u8], planes: &mut [u8], dst: &mut [u8]) {
         let w = planes.len() / 3;
         let [r, g, b] = three_planes(planes, w);
         split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
-        for ((r, g), b) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
-            let v8 = (*r).max(*g).max(*b);
-            let v = v8 as f32;
-            let nv = (v * f).min(255.0).floor();
-            let k = nv / v.max(1.0);
-            let offset = if v8 == 0 { nv + NUDGE } else { NUDGE };
-            *r = nearest(scale_channel(*r as f32, k, offset));
-            *g = nearest(scale_channel(*g as f32, k, offset));
-            *b = nearest(scale_channel(*b as f32, k, offset));
+        let done = super::avx2::value_scale_planes(f, r, g, b);
+        let rest = r[done..].iter_mut().zip(&mut g[done..]).zip(&mut b[done..]);
+        for ((r, g), b) in rest {
+            [*r, *g, *b] = scale_pixel(f, [*r, *g, *b]);
         }
         merge_rgb(format, [&*r, &*g, &*b], dst);
     }
@@ -93,8 +99,45 @@ mod tests {
                     let want = (((p + z_fixed) * k_fixed + (1 << 23) + (1 << 12)) >> 24) as u8;
                     let got = nearest(scale_channel(p as f32, k, offset));
                     assert_eq!(got, want, "p {p} v {v} nv {nv}");
+                    // The AVX2 kernel's fused multiply-add (one rounding instead of two).
+                    let fused = nearest((p as f32).mul_add(k, offset));
+                    assert_eq!(fused, want, "fused: p {p} v {v} nv {nv}");
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_wide_kernel_scales_every_channel_and_value_like_the_pixel_code() {
+        // Every (channel, value) pair, with the value in each of the three channels, and black;
+        // a tail that is not a whole block. Without AVX2 the kernel writes nothing (checked too).
+        let mut pixels = vec![[0, 0, 0]];
+        for v in 0..=255u8 {
+            for p in 0..=v {
+                let q = ((p as u32 * 37 + v as u32) % (v as u32 + 1)) as u8;
+                pixels.extend([[p, v, q], [v, q, p], [q, p, v]]);
+            }
+        }
+        pixels.truncate(pixels.len() / 32 * 32 + 13);
+        let factors = crate::camera::weather::BRIGHTNESS_INCREASE
+            .into_iter()
+            .chain(crate::camera::weather::BRIGHTNESS_DECREASE)
+            .chain([0.0, 1.0, 2.5, 300.0]);
+        for f in factors {
+            let [mut r, mut g, mut b] =
+                [0, 1, 2].map(|c| pixels.iter().map(|p| p[c]).collect::<Vec<u8>>());
+            let done = super::super::avx2::value_scale_planes(f, &mut r, &mut g, &mut b);
+            let wide = crate::camera::ops::wide_available();
+            assert_eq!(done, if wide { pixels.len() / 32 * 32 } else { 0 }, "f {f}");
+            for (i, &p) in pixels.iter().enumerate().take(done) {
+                assert_eq!([r[i], g[i], b[i]], scale_pixel(f, p), "f {f} pixel {p:?}");
+            }
+        }
+        // A factor that is not finite is left to the pixel code.
+        let [mut r, mut g, mut b] = [[0u8; 32]; 3];
+        assert_eq!(
+            super::super::avx2::value_scale_planes(f32::INFINITY, &mut r, &mut g, &mut b),
+            0
+        );
     }
 }
