@@ -67,6 +67,9 @@ pub fn three_planes<T>(buf: &mut [T], w: usize) -> [&mut [T]; 3] {
 /// known at compile time, which lets the compiler vectorise it.
 #[inline(always)]
 pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
+    // Inlined into the caller: its AVX2 copy (`wide_fn!`) vectorises the stride-3 loop well,
+    // a function of its own would be compiled for the baseline CPU.
+    #[inline(always)]
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         src: &[u8],
         [r, g, b]: [&mut [f32]; 3],
@@ -88,6 +91,9 @@ pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
 /// [`split_rgb`] into planes of bytes.
 #[inline(always)]
 pub fn split_rgb_bytes(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [u8]; 3]) {
+    // Inlined into the caller: its AVX2 copy (`wide_fn!`) vectorises the stride-3 loop well,
+    // a function of its own would be compiled for the baseline CPU.
+    #[inline(always)]
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         src: &[u8],
         [r, g, b]: [&mut [u8]; 3],
@@ -111,6 +117,9 @@ pub fn split_rgb_bytes(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [u8]; 3
 /// [`split_rgb`].
 #[inline(always)]
 pub fn merge_rgb(format: PixelFormat, [r, g, b]: [&[u8]; 3], dst: &mut [u8]) {
+    // Inlined into the caller: its AVX2 copy (`wide_fn!`) vectorises the stride-3 loop well,
+    // a function of its own would be compiled for the baseline CPU.
+    #[inline(always)]
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         [r, g, b]: [&[u8]; 3],
         dst: &mut [u8],
