@@ -264,9 +264,11 @@ wide_fn! {
 
 wide_fn! {
     /// JFIF RGB to YCbCr of one row of `c`-byte pixels: luma into `y`, chroma added into the
-    /// half-width `cb`, `cr` (left pixel of each pair first). `work` (3 `y.len()` floats) holds the
-    /// row deinterleaved, so that the arithmetic runs on contiguous arrays.
-    fn to_ycc(
+    /// half-width `cb`, `cr` (left pixel of each pair first), or with `FIRST` (the first image
+    /// row of a chroma row) added to zero and written there, so that the chroma rows need no
+    /// clearing. `work` (3 `y.len()` floats) holds the row deinterleaved, so that the arithmetic
+    /// runs on contiguous arrays.
+    fn to_ycc<const FIRST: bool>(
         src: &[u8],
         format: PixelFormat,
         work: &mut [f32],
@@ -292,14 +294,16 @@ wide_fn! {
         for (((yv, cbv), crv), ((r, g), b)) in out.zip(rgb) {
             yv[0] = luma(r[0], g[0], b[0]);
             yv[1] = luma(r[1], g[1], b[1]);
-            *cbv = (*cbv + blue(r[0], g[0], b[0])) + blue(r[1], g[1], b[1]);
-            *crv = (*crv + red(r[0], g[0], b[0])) + red(r[1], g[1], b[1]);
+            let (cb0, cr0) = if FIRST { (0.0, 0.0) } else { (*cbv, *crv) };
+            *cbv = (cb0 + blue(r[0], g[0], b[0])) + blue(r[1], g[1], b[1]);
+            *crv = (cr0 + red(r[0], g[0], b[0])) + red(r[1], g[1], b[1]);
         }
         if w % 2 == 1 {
             let (r, g, b) = (r[w - 1], g[w - 1], b[w - 1]);
             y[w - 1] = luma(r, g, b);
-            cb[n] += blue(r, g, b);
-            cr[n] += red(r, g, b);
+            let (cb0, cr0) = if FIRST { (0.0, 0.0) } else { (cb[n], cr[n]) };
+            cb[n] = cb0 + blue(r, g, b);
+            cr[n] = cr0 + red(r, g, b);
         }
     }
 }
@@ -503,8 +507,8 @@ impl Bands {
         let (w, pw, cw, cpw) = (at.w, at.pw, at.cw, at.cpw);
         let slot = k % 2;
         let (y, cb, cr) = (&mut self.y[slot], &mut self.cb[slot], &mut self.cr[slot]);
-        cb.fill(0.0);
-        cr.fill(0.0);
+        // Each chroma row is written by the first image row over it and added to by the second
+        // (none is left unwritten: a chroma row below the frame is copied from the last one).
         let top = BAND_ROWS * k;
         let rows = at.ph.min(top + BAND_ROWS) - top;
         for i in 0..rows {
@@ -512,7 +516,12 @@ impl Bands {
             if r < at.h {
                 let (yrow, c) = (&mut y[i * pw..(i + 1) * pw], (i / 2) * cpw);
                 let (cbrow, crrow) = (&mut cb[c..c + cpw], &mut cr[c..c + cpw]);
-                to_ycc(
+                let convert = if i % 2 == 0 {
+                    to_ycc::<true>
+                } else {
+                    to_ycc::<false>
+                };
+                convert(
                     input.row(r),
                     input.format,
                     &mut self.work,
