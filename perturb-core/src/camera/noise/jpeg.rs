@@ -114,8 +114,18 @@ fn dct_columns<const SHIFT: bool>(
 /// `out`, as long loops over the band's width: the even and odd coefficients' sums (each in
 /// order from zero) for outputs x < 4 give outputs x and 7 - x as their sum and difference. With
 /// `LAST`, every output is shifted back by 128 and clamped to 0..=255 as it is stored.
+///
+/// Only the band's first `ROWS` rows (1, 4 or 8) enter the sums: the caller has found the others
+/// zero in every block (see [`live_rows`]), and leaving a zero term out of a sum that starts at
+/// +0 changes no bit of it (the sum is never -0, so adding +-0 returns it unchanged). At the low
+/// qualities most high frequencies quantise to zero in a whole band.
 #[inline(always)]
-fn idct_columns<const LAST: bool>(m: &Block, band: &[f32], pw: usize, out: &mut [f32]) {
+fn idct_columns<const LAST: bool, const ROWS: usize>(
+    m: &Block,
+    band: &[f32],
+    pw: usize,
+    out: &mut [f32],
+) {
     let finish = |v: f32| {
         if LAST {
             (v + 128.0).clamp(0.0, 255.0)
@@ -137,22 +147,58 @@ fn idct_columns<const LAST: bool>(m: &Block, band: &[f32], pw: usize, out: &mut 
         for l in 0..pw {
             let (mut even, mut odd) = (0.0f32, 0.0f32);
             even += mx[0] * r0[l];
-            odd += mx[1] * r1[l];
-            even += mx[2] * r2[l];
-            odd += mx[3] * r3[l];
-            even += mx[4] * r4[l];
-            odd += mx[5] * r5[l];
-            even += mx[6] * r6[l];
-            odd += mx[7] * r7[l];
+            if ROWS > 1 {
+                odd += mx[1] * r1[l];
+                even += mx[2] * r2[l];
+                odd += mx[3] * r3[l];
+            }
+            if ROWS > 4 {
+                even += mx[4] * r4[l];
+                odd += mx[5] * r5[l];
+                even += mx[6] * r6[l];
+                odd += mx[7] * r7[l];
+            }
             o1[l] = finish(even + odd);
             o2[l] = finish(even - odd);
         }
     }
 }
 
+/// How many leading rows of a band of 8 rows of `pw` samples [`idct_columns`] must sum: 1 when
+/// rows 1..8 are all zero, 4 when rows 4..8 are, 8 otherwise. The rows are scanned whole, by
+/// OR-ing the samples' bits without their signs (a loop the compiler vectorises, far cheaper
+/// than the sums it can save).
+#[inline(always)]
+fn live_rows(band: &[f32], pw: usize) -> usize {
+    let zero = |u: usize| {
+        let bits = band[u * pw..(u + 1) * pw]
+            .iter()
+            .fold(0u32, |acc, &v| acc | (v.to_bits() & 0x7fff_ffff));
+        bits == 0
+    };
+    if !(4..8).all(zero) {
+        8
+    } else if !(1..4).all(zero) {
+        4
+    } else {
+        1
+    }
+}
+
 /// Registry constructor of C-A4.
 pub const JPEG: CameraBuilder = |s| {
     let q = JPEG_QUALITY[s.level()];
+    Ok(Box::new(JpegCompression {
+        luma_q: transposed_steps(&scaled_table(&LUMA_Q, q)),
+        chroma_q: transposed_steps(&scaled_table(&CHROMA_Q, q)),
+        m: dct_matrix(),
+        spare: Default::default(),
+    }))
+};
+
+/// The orthonormal DCT-II matrix `m[u][x] = c(u)/2 cos((2x+1)u pi/16)`, `c(0) = 1/sqrt(2)`,
+/// `c(u) = 1` otherwise.
+fn dct_matrix() -> Block {
     let mut m = [[0f32; 8]; 8];
     for (u, row) in m.iter_mut().enumerate() {
         for (x, b) in row.iter_mut().enumerate() {
@@ -165,13 +211,8 @@ pub const JPEG: CameraBuilder = |s| {
                 as f32;
         }
     }
-    Ok(Box::new(JpegCompression {
-        luma_q: transposed_steps(&scaled_table(&LUMA_Q, q)),
-        chroma_q: transposed_steps(&scaled_table(&CHROMA_Q, q)),
-        m,
-        spare: Default::default(),
-    }))
-};
+    m
+}
 
 /// A plane of f32 samples, padded to whole 8x8 blocks by edge replication.
 struct Plane {
@@ -256,9 +297,17 @@ wide_fn! {
         }
         // Inverse: B = M^T C M = M^T (M^T C^T)^T.
         // The last pass shifts back by 128 and clamps to 0..=255 as it stores.
-        idct_columns::<false>(m, band, pw, s2);
+        match live_rows(band, pw) {
+            1 => idct_columns::<false, 1>(m, band, pw, s2),
+            4 => idct_columns::<false, 4>(m, band, pw, s2),
+            _ => idct_columns::<false, 8>(m, band, pw, s2),
+        }
         transpose_blocks(s2, pw);
-        idct_columns::<true>(m, s2, pw, band);
+        match live_rows(s2, pw) {
+            1 => idct_columns::<true, 1>(m, s2, pw, band),
+            4 => idct_columns::<true, 4>(m, s2, pw, band),
+            _ => idct_columns::<true, 8>(m, s2, pw, band),
+        }
     }
 }
 
@@ -693,6 +742,44 @@ mod tests {
                 .iter()
                 .all(|&v| v == 77)
         );
+    }
+
+    #[test]
+    fn the_inverse_transform_of_the_live_rows_alone_keeps_every_bit() {
+        // Bands whose rows past 1 or 4 are zero (some -0): the shortened sums give the bits of
+        // the full ones, in both passes; a nonzero sample anywhere in a row keeps it live.
+        let m = dct_matrix();
+        let pw = 40;
+        for live in [1, 4, 8] {
+            let mut band: Vec<f32> = (0..8 * pw)
+                .map(|i| ((i * 7919 % 1000) as f32 - 500.0) * 0.37)
+                .collect();
+            for (i, v) in band.iter_mut().enumerate().skip(live * pw) {
+                *v = if i % 3 == 0 { -0.0 } else { 0.0 };
+            }
+            assert_eq!(live_rows(&band, pw), live);
+            for last in [false, true] {
+                let (mut full, mut short) = (vec![0f32; 8 * pw], vec![0f32; 8 * pw]);
+                if last {
+                    idct_columns::<true, 8>(&m, &band, pw, &mut full);
+                } else {
+                    idct_columns::<false, 8>(&m, &band, pw, &mut full);
+                }
+                match (last, live) {
+                    (false, 1) => idct_columns::<false, 1>(&m, &band, pw, &mut short),
+                    (false, 4) => idct_columns::<false, 4>(&m, &band, pw, &mut short),
+                    (true, 1) => idct_columns::<true, 1>(&m, &band, pw, &mut short),
+                    (true, 4) => idct_columns::<true, 4>(&m, &band, pw, &mut short),
+                    (false, _) => idct_columns::<false, 8>(&m, &band, pw, &mut short),
+                    (true, _) => idct_columns::<true, 8>(&m, &band, pw, &mut short),
+                }
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&full), bits(&short), "live {live} last {last}");
+            }
+            // One nonzero sample in the last row makes every row live.
+            band[8 * pw - 1] = 1e-30;
+            assert_eq!(live_rows(&band, pw), 8);
+        }
     }
 
     #[test]
