@@ -464,24 +464,20 @@ fn fit_narrow_blend(gain: (u32, u32), w: f64, lut: &[u8; 256]) -> Option<(i16, i
         let b = ((v as u32 * gain.0 + gain.1) >> 16).min(255) as i32;
         (b - v as i32, lut[v] as i32 - v as i32)
     });
-    for step in 0..=16 {
-        for weight in [w0 - step, w0 + step] {
-            if !(0..=32767).contains(&weight) || (step == 0 && weight != w0) {
-                continue;
-            }
-            // floor((high + k) / 32) == want  <=>  32 want - high <= k <= 32 want + 31 - high
-            let (mut lo, mut hi) = (-1024, 1024);
-            for &(d, want) in &pairs {
-                let high = (64 * d * weight) >> 16;
-                lo = lo.max(32 * want - high);
-                hi = hi.min(32 * want + 31 - high);
-            }
-            if lo <= hi {
-                let fit = (weight as i16, lo as i16);
-                // The bound is exact; checked once more on the bytes themselves.
-                if (0..=255u8).all(|v| narrow_byte(v, gain, fit) == lut[v as usize]) {
-                    return Some(fit);
-                }
+    let weights = std::iter::once(w0).chain((1..=16).flat_map(|step| [w0 - step, w0 + step]));
+    for weight in weights.filter(|w| (0..=32767).contains(w)) {
+        // floor((high + k) / 32) == want  <=>  32 want - high <= k <= 32 want + 31 - high
+        let (mut lo, mut hi) = (-1024, 1024);
+        for &(d, want) in &pairs {
+            let high = (64 * d * weight) >> 16;
+            lo = lo.max(32 * want - high);
+            hi = hi.min(32 * want + 31 - high);
+        }
+        if lo <= hi {
+            let fit = (weight as i16, lo as i16);
+            // The bound is exact; checked once more on the bytes themselves.
+            if (0..=255u8).all(|v| narrow_byte(v, gain, fit) == lut[v as usize]) {
+                return Some(fit);
             }
         }
     }
