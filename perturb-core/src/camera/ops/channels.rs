@@ -91,8 +91,7 @@ pub fn split_rgb(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [f32]; 3]) {
 /// [`split_rgb`] into planes of bytes.
 #[inline(always)]
 pub fn split_rgb_bytes(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [u8]; 3]) {
-    // Inlined into the caller: its AVX2 copy (`wide_fn!`) vectorises the stride-3 loop well,
-    // a function of its own would be compiled for the baseline CPU.
+    // Inlined, as in `split_rgb`.
     #[inline(always)]
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         src: &[u8],
@@ -117,8 +116,7 @@ pub fn split_rgb_bytes(src: &[u8], format: PixelFormat, [r, g, b]: [&mut [u8]; 3
 /// [`split_rgb`].
 #[inline(always)]
 pub fn merge_rgb(format: PixelFormat, [r, g, b]: [&[u8]; 3], dst: &mut [u8]) {
-    // Inlined into the caller: its AVX2 copy (`wide_fn!`) vectorises the stride-3 loop well,
-    // a function of its own would be compiled for the baseline CPU.
+    // Inlined, as in `split_rgb`.
     #[inline(always)]
     fn each<const C: usize, const R: usize, const G: usize, const B: usize>(
         [r, g, b]: [&[u8]; 3],

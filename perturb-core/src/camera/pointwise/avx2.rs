@@ -429,46 +429,43 @@ fn line_blocks<const ADD: bool>(
     })
 }
 
-/// `_mm256_mulhi_epu16` as the one instruction it names. The intrinsic is written as 32-bit
-/// products that the compiler matches back to `vpmulhuw` only when it sees both operands widened
-/// from 16 bits; with a multiplier broadcast before the loop it does not, and runs the multiply
-/// in 32-bit lanes (twice the instructions).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn mulhi_epu16(a: __m256i, b: __m256i) -> __m256i {
-    let out;
-    // SAFETY: one AVX2 instruction on registers (the features are this function's), no memory.
-    unsafe {
-        std::arch::asm!(
-            "vpmulhuw {o}, {a}, {b}",
-            o = lateout(ymm_reg) out,
-            a = in(ymm_reg) a,
-            b = in(ymm_reg) b,
-            options(pure, nomem, nostack, preserves_flags),
-        );
-    }
-    out
+/// A function running one two-operand AVX2 instruction on registers, through `asm!`.
+macro_rules! one_instruction {
+    ($(#[$doc:meta])* fn $name:ident = $instruction:literal) => {
+        $(#[$doc])*
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        #[inline]
+        fn $name(a: __m256i, b: __m256i) -> __m256i {
+            let out;
+            // SAFETY: one AVX2 instruction on registers (the features are this function's), no
+            // memory.
+            unsafe {
+                std::arch::asm!(
+                    concat!($instruction, " {o}, {a}, {b}"),
+                    o = lateout(ymm_reg) out,
+                    a = in(ymm_reg) a,
+                    b = in(ymm_reg) b,
+                    options(pure, nomem, nostack, preserves_flags),
+                );
+            }
+            out
+        }
+    };
 }
 
-/// `_mm256_mulhi_epi16` (signed) as the one instruction it names, for the reason of
-/// [`mulhi_epu16`].
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn mulhi_epi16(a: __m256i, b: __m256i) -> __m256i {
-    let out;
-    // SAFETY: one AVX2 instruction on registers (the features are this function's), no memory.
-    unsafe {
-        std::arch::asm!(
-            "vpmulhw {o}, {a}, {b}",
-            o = lateout(ymm_reg) out,
-            a = in(ymm_reg) a,
-            b = in(ymm_reg) b,
-            options(pure, nomem, nostack, preserves_flags),
-        );
-    }
-    out
+one_instruction! {
+    /// `_mm256_mulhi_epu16` as the one instruction it names. The intrinsic is written as 32-bit
+    /// products that the compiler matches back to `vpmulhuw` only when it sees both operands
+    /// widened from 16 bits; with a multiplier broadcast before the loop it does not, and runs the
+    /// multiply in 32-bit lanes (twice the instructions).
+    fn mulhi_epu16 = "vpmulhuw"
+}
+
+one_instruction! {
+    /// `_mm256_mulhi_epi16` (signed) as the one instruction it names, for the reason of
+    /// [`mulhi_epu16`].
+    fn mulhi_epi16 = "vpmulhw"
 }
 
 #[cfg(target_arch = "x86_64")]
