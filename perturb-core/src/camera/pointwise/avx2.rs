@@ -1,14 +1,13 @@
 //! Hand-written AVX2 kernels where the compiler's own vectorisation falls short: [`super::ByteMap`]'s
 //! forms 32 bytes at a time with the patched inputs blended in the same pass, C-F5's luma blend
-//! and C-F4's gain blend in 16-bit lanes, C-C4/C-C5's value scale in float lanes, and the
-//! per-channel sums of a row by `vpsadbw`.
+//! and C-F4's gain blend in 16-bit lanes, C-C4/C-C5's value scale (a gain per pixel in float
+//! lanes, the channels in 16-bit lanes), and the per-channel sums of a row by `vpsadbw`.
 //!
 //! The compiler runs a 16-bit multiply-high in 32-bit lanes when its multiplier is a broadcast
 //! made before the loop, cannot merge the patches into the loop of the form, and widens or
-//! shuffles more than the work needs. These kernels spell the instructions out. The integer ones
-//! give the bytes of the scalar definitions on every input; the float one gives the same exact
-//! roundings (tests compare each with its scalar code on every byte value or every colour pair
-//! that matters, every tail length and the patches).
+//! shuffles more than the work needs. These kernels spell the instructions out. Each gives the
+//! bytes of its scalar definition on every input (tests compare each with its scalar code on
+//! every byte value or every colour pair that matters, every tail length and the patches).
 //!
 //! Each function handles the whole blocks of a row and returns how much it wrote; the caller
 //! finishes the tail with the scalar code. Without AVX2 (or with
@@ -141,53 +140,78 @@ fn luma_blend_planes_avx2(
 }
 
 /// C-C4/C-C5's HSV value scale ([`super::scale_value`]) over byte planes of red, green and blue,
-/// in place, 32 pixels at a time in 8-lane float vectors; returns the pixels written (none for a
-/// factor `f` that is not finite). Each channel is `round(c k + NUDGE)` with `k = V' / max(V, 1)`
-/// as the scalar code computes it, the product and the sum fused: both roundings are exact (a
-/// test checks the fused form on every channel, value and new value), so the bytes are the
-/// scalar code's. A black pixel needs no case of its own here: with a finite factor its new
-/// value is 0, as every channel's.
+/// in place, 32 pixels at a time; returns the pixels written (none for a factor `f` that is not
+/// finite). Per pixel, in float lanes, the new value `V' = min(255, floor(V f))` with the scalar
+/// code's operations and the gain `K = floor(V' 2^17 / V) + 1` (one division; [`value_gain`]);
+/// then each channel in 16-bit lanes is `(c K + 2^16) >> 17`: with `K = 2^16 hi + lo`, the
+/// rounded half of `c hi + ((c lo) >> 16)` (the low half of `c lo` is below `2^16`, the `+ 2^16`
+/// a `+ 1` before the halving): one multiply, one multiply-high and one average. That is
+/// `round(c V' / V)` with halves up for every channel `c <= V` (a test checks every `V`, `V'` and
+/// `c`), the scalar code's bytes. A black pixel's lanes divide 0 by 0: whatever gain that gives
+/// multiplies channels that are all 0 (with a finite factor its new value is 0 too).
 pub(super) fn value_scale_planes(f: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) -> usize {
     #[cfg(target_arch = "x86_64")]
     if crate::camera::ops::wide_available() && f.is_finite() {
-        // SAFETY: the CPU has AVX2 and FMA (`wide_available` checked them).
+        // SAFETY: the CPU has AVX2 (`wide_available` checked it).
         return unsafe { value_scale_planes_avx2(f, r, g, b) };
     }
     let _ = (f, r, g, b);
     0
 }
 
+/// The gain of [`value_scale_planes`] for a value `v >= 1` and new value `nv`, computed as its
+/// float lanes do: the f32 quotient of `nv 2^17` (exact) by `v`, truncated, plus one.
+#[cfg(test)]
+pub(super) fn value_gain(v: u8, nv: u8) -> u32 {
+    (((nv as u32) << 17) as f32 / v as f32) as u32 + 1
+}
+
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
+#[target_feature(enable = "avx2")]
 fn value_scale_planes_avx2(f: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) -> usize {
-    let f = _mm256_set1_ps(f);
-    let (top, one) = (_mm256_set1_ps(255.0), _mm256_set1_ps(1.0));
-    let nudge = _mm256_set1_ps(super::value::NUDGE);
     let zero = _mm256_setzero_si256();
-    // The two packs leave the 4-byte groups of the four 8-pixel quarters interleaved by
-    // 128-bit half: this puts them back in order.
-    let order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+    let (f, top, scale) = (
+        _mm256_set1_ps(f),
+        _mm256_set1_ps(255.0),
+        _mm256_set1_ps(131_072.0),
+    );
+    let (low, one) = (_mm256_set1_epi32(0xffff), _mm256_set1_epi32(1));
+    // Eight pixels' gains from their values in 32-bit lanes.
+    let gains = |v: __m256i| {
+        let v = _mm256_cvtepi32_ps(v);
+        let nv = _mm256_floor_ps(_mm256_min_ps(_mm256_mul_ps(v, f), top));
+        let k = _mm256_div_ps(_mm256_mul_ps(nv, scale), v);
+        _mm256_add_epi32(_mm256_cvttps_epi32(k), one)
+    };
+    // Sixteen pixels' gains from their values in 16-bit lanes, as the low and high halves in
+    // the same 16-bit lanes (the unpacks and packs keep each 128-bit half's order).
+    let halves = |v: __m256i| {
+        let k = [
+            _mm256_unpacklo_epi16(v, zero),
+            _mm256_unpackhi_epi16(v, zero),
+        ]
+        .map(gains);
+        let lo = _mm256_packus_epi32(_mm256_and_si256(k[0], low), _mm256_and_si256(k[1], low));
+        let hi = _mm256_packus_epi32(_mm256_srli_epi32::<16>(k[0]), _mm256_srli_epi32::<16>(k[1]));
+        (lo, hi)
+    };
+    let scale = |c: __m256i, (lo, hi): (__m256i, __m256i)| {
+        _mm256_avg_epu16(_mm256_mullo_epi16(c, hi), mulhi_epu16(c, lo))
+    };
     let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
     for i in (0..n).step_by(32) {
-        let mut out = [[zero; 4]; 3];
-        for (q, at) in (i..i + 32).step_by(8).enumerate() {
-            // SAFETY: `at + 8 <= n`, within each plane: the 8-byte loads stay inside.
-            let x = [&*r, &*g, &*b].map(|p| unsafe {
-                _mm256_cvtepu8_epi32(_mm_loadl_epi64(p.as_ptr().add(at).cast()))
-            });
-            let v = _mm256_cvtepi32_ps(_mm256_max_epi32(_mm256_max_epi32(x[0], x[1]), x[2]));
-            let nv = _mm256_floor_ps(_mm256_min_ps(_mm256_mul_ps(v, f), top));
-            let k = _mm256_div_ps(nv, _mm256_max_ps(v, one));
-            for (c, x) in x.into_iter().enumerate() {
-                let scaled = _mm256_fmadd_ps(_mm256_cvtepi32_ps(x), k, nudge);
-                out[c][q] = _mm256_cvtps_epi32(scaled);
-            }
-        }
-        for (plane, [o0, o1, o2, o3]) in [&mut *r, &mut *g, &mut *b].into_iter().zip(out) {
-            // At most 255 per lane: the saturating packs keep every value.
-            let words = [_mm256_packus_epi32(o0, o1), _mm256_packus_epi32(o2, o3)];
-            let bytes = _mm256_permutevar8x32_epi32(_mm256_packus_epi16(words[0], words[1]), order);
-            // SAFETY: `i + 32 <= n`, within the plane: the 32-byte store stays inside.
+        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
+        let x = [&*r, &*g, &*b].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
+        let v = _mm256_max_epu8(_mm256_max_epu8(x[0], x[1]), x[2]);
+        let k_lo = halves(_mm256_unpacklo_epi8(v, zero));
+        let k_hi = halves(_mm256_unpackhi_epi8(v, zero));
+        for (plane, x) in [&mut *r, &mut *g, &mut *b].into_iter().zip(x) {
+            let lo = scale(_mm256_unpacklo_epi8(x, zero), k_lo);
+            let hi = scale(_mm256_unpackhi_epi8(x, zero), k_hi);
+            // At most 255 per lane (the rounded `c V' / V <= V'`): the pack keeps it and undoes
+            // the unpacks' order.
+            let bytes = _mm256_packus_epi16(lo, hi);
+            // SAFETY: as the loads.
             unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
         }
     }

@@ -108,6 +108,22 @@ mod tests {
     }
 
     #[test]
+    fn the_wide_kernels_gains_round_every_channel_exactly() {
+        // Every value v, new value nv and channel c <= v: (c K + 2^16) >> 17 with the kernel's
+        // gain against the exact rounding of c nv / v, halves up.
+        for v in 1..=255u8 {
+            for nv in 0..=255u8 {
+                let k = super::super::avx2::value_gain(v, nv) as u64;
+                let (v, nv) = (v as u64, nv as u64);
+                for c in 0..=v {
+                    let want = (2 * c * nv + v) / (2 * v);
+                    assert_eq!((c * k + (1 << 16)) >> 17, want, "c {c} v {v} nv {nv}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn the_wide_kernel_scales_every_channel_and_value_like_the_pixel_code() {
         // Every (channel, value) pair, with the value in each of the three channels, and black;
         // a tail that is not a whole block. Without AVX2 the kernel writes nothing (checked too).
