@@ -210,10 +210,13 @@ fn wide_and_baseline_code_give_the_same_bytes(e: &Entry) {
         return;
     }
     // Odd sizes (vector loops with remainders) in every format; the real frame when present.
-    let mut inputs: Vec<Image> = [PixelFormat::Rgb8, PixelFormat::Bgra8, PixelFormat::Mono8]
-        .into_iter()
-        .map(|f| synthetic(203, 61, f))
-        .collect();
+    let formats = [
+        PixelFormat::Rgb8,
+        PixelFormat::Bgr8,
+        PixelFormat::Bgra8,
+        PixelFormat::Mono8,
+    ];
+    let mut inputs: Vec<Image> = formats.into_iter().map(|f| synthetic(203, 61, f)).collect();
     if let Some(frame) = common::kitti_image("wide_and_baseline_code_give_the_same_bytes", 0) {
         inputs.push(resize_bilinear(&frame.view(), 401, 121));
     }

@@ -7,6 +7,7 @@ mod filter;
 mod float_image;
 mod gaussian;
 mod hsv;
+mod interleave;
 mod rows;
 mod simd;
 mod transpose;
@@ -17,6 +18,8 @@ pub use filter::*;
 pub use float_image::*;
 pub use gaussian::*;
 pub use hsv::*;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use interleave::{load3, store3};
 pub use rows::*;
 pub(crate) use simd::wide_fn;
 pub use simd::*;

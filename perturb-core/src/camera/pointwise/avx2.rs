@@ -166,9 +166,54 @@ pub(super) fn value_gain(v: u8, nv: u8) -> u32 {
     (((nv as u32) << 17) as f32 / v as f32) as u32 + 1
 }
 
+/// [`value_scale_planes`] on the whole 32-pixel blocks of a row of 3-byte pixels, `src` to
+/// `dst`, the channels taken apart and put back in registers (the scale treats the three
+/// channels alike, so their order does not matter); returns the pixels written.
+pub(super) fn value_scale_rgb(f: f32, src: &[u8], dst: &mut [u8]) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if crate::camera::ops::wide_available() && f.is_finite() {
+        // SAFETY: the CPU has AVX2 (`wide_available` checked it).
+        return unsafe { value_scale_rgb_avx2(f, src, dst) };
+    }
+    let _ = (f, src, dst);
+    0
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn value_scale_rgb_avx2(f: f32, src: &[u8], dst: &mut [u8]) -> usize {
+    use crate::camera::ops::{load3, store3};
+    let mut n = 0;
+    for (s, d) in src.chunks_exact(96).zip(dst.chunks_exact_mut(96)) {
+        store3(d, value_scale_block(f, load3(s)));
+        n += 32;
+    }
+    n
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn value_scale_planes_avx2(f: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) -> usize {
+    let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
+    for i in (0..n).step_by(32) {
+        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
+        let x = [&*r, &*g, &*b].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
+        for (plane, bytes) in [&mut *r, &mut *g, &mut *b]
+            .into_iter()
+            .zip(value_scale_block(f, x))
+        {
+            // SAFETY: as the loads.
+            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
+        }
+    }
+    n
+}
+
+/// 32 pixels' channels of [`value_scale_planes`], a vector each.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn value_scale_block(f: f32, x: [__m256i; 3]) -> [__m256i; 3] {
     let zero = _mm256_setzero_si256();
     let (f, top, scale) = (
         _mm256_set1_ps(f),
@@ -198,24 +243,18 @@ fn value_scale_planes_avx2(f: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) -> 
     let scale = |c: __m256i, (lo, hi): (__m256i, __m256i)| {
         _mm256_avg_epu16(_mm256_mullo_epi16(c, hi), mulhi_epu16(c, lo))
     };
-    let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
-    for i in (0..n).step_by(32) {
-        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
-        let x = [&*r, &*g, &*b].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
-        let v = _mm256_max_epu8(_mm256_max_epu8(x[0], x[1]), x[2]);
-        let k_lo = halves(_mm256_unpacklo_epi8(v, zero));
-        let k_hi = halves(_mm256_unpackhi_epi8(v, zero));
-        for (plane, x) in [&mut *r, &mut *g, &mut *b].into_iter().zip(x) {
-            let lo = scale(_mm256_unpacklo_epi8(x, zero), k_lo);
-            let hi = scale(_mm256_unpackhi_epi8(x, zero), k_hi);
-            // At most 255 per lane (the rounded `c V' / V <= V'`): the pack keeps it and undoes
-            // the unpacks' order.
-            let bytes = _mm256_packus_epi16(lo, hi);
-            // SAFETY: as the loads.
-            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
-        }
+    let v = _mm256_max_epu8(_mm256_max_epu8(x[0], x[1]), x[2]);
+    let k_lo = halves(_mm256_unpacklo_epi8(v, zero));
+    let k_hi = halves(_mm256_unpackhi_epi8(v, zero));
+    let mut out = x;
+    for c in &mut out {
+        let lo = scale(_mm256_unpacklo_epi8(*c, zero), k_lo);
+        let hi = scale(_mm256_unpackhi_epi8(*c, zero), k_hi);
+        // At most 255 per lane (the rounded `c V' / V <= V'`): the pack keeps it and undoes
+        // the unpacks' order.
+        *c = _mm256_packus_epi16(lo, hi);
     }
-    n
+    out
 }
 
 /// Sums of the bytes of `src` at each position modulo `C` (3 or 4: the pixels' channels) over

@@ -65,7 +65,14 @@ fn scale_pixel(f: f32, [r, g, b]: [u8; 3]) -> [u8; 3] {
 wide_fn! {
     /// One row of [`scale_value`]; `planes` holds three byte planes of the row's width.
     fn scale_value_row(format: PixelFormat, f: f32, src: &[u8], planes: &mut [u8], dst: &mut [u8]) {
-        let w = planes.len() / 3;
+        // RGB and BGR rows' whole blocks straight from row to row (the scale treats the
+        // channels alike), the rest through planes.
+        let direct = match format {
+            PixelFormat::Rgb8 | PixelFormat::Bgr8 => super::avx2::value_scale_rgb(f, src, dst),
+            _ => 0,
+        };
+        let (src, dst) = (&src[3 * direct..], &mut dst[3 * direct..]);
+        let w = planes.len() / 3 - direct;
         let [r, g, b] = three_planes(planes, w);
         split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
         let done = super::avx2::value_scale_planes(f, r, g, b);
@@ -148,6 +155,21 @@ mod tests {
             for (i, &p) in pixels.iter().enumerate().take(done) {
                 assert_eq!([r[i], g[i], b[i]], scale_pixel(f, p), "f {f} pixel {p:?}");
             }
+            // The same pixels as one row of 3-byte pixels, row to row.
+            let row = pixels.concat();
+            let mut out = vec![0u8; row.len()];
+            assert_eq!(super::super::avx2::value_scale_rgb(f, &row, &mut out), done);
+            for (i, &p) in pixels.iter().enumerate().take(done) {
+                assert_eq!(
+                    out[3 * i..3 * i + 3],
+                    scale_pixel(f, p),
+                    "row: f {f} pixel {p:?}"
+                );
+            }
+            assert!(
+                out[3 * done..].iter().all(|&v| v == 0),
+                "f {f}: wrote past the blocks"
+            );
         }
         // A factor that is not finite is left to the pixel code.
         let [mut r, mut g, mut b] = [[0u8; 32]; 3];
