@@ -92,6 +92,63 @@ fn luma_blend_planes_avx2(
     g: &mut [u8],
     b: &mut [u8],
 ) -> usize {
+    let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
+    for i in (0..n).step_by(32) {
+        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
+        let x = [&*r, &*g, &*b].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
+        let out = luma_blend_block(keep, luma, x);
+        for (plane, bytes) in [&mut *r, &mut *g, &mut *b].into_iter().zip(out) {
+            // SAFETY: as the loads.
+            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
+        }
+    }
+    n
+}
+
+/// [`luma_blend_planes`] on the whole 32-pixel blocks of a row of 3-byte pixels, `src` to `dst`
+/// (red first, or blue first with `bgr`), the channels taken apart and put back in registers;
+/// returns the pixels written.
+pub(super) fn luma_blend_rgb(
+    keep: super::Split16,
+    luma: super::Split16,
+    bgr: bool,
+    src: &[u8],
+    dst: &mut [u8],
+) -> usize {
+    #[cfg(target_arch = "x86_64")]
+    if crate::camera::ops::wide_available() {
+        // SAFETY: the CPU has AVX2 (`wide_available` checked it).
+        return unsafe { luma_blend_rgb_avx2(keep, luma, bgr, src, dst) };
+    }
+    let _ = (keep, luma, bgr, src, dst);
+    0
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn luma_blend_rgb_avx2(
+    keep: super::Split16,
+    luma: super::Split16,
+    bgr: bool,
+    src: &[u8],
+    dst: &mut [u8],
+) -> usize {
+    use crate::camera::ops::{load3, store3};
+    // Blue-first rows swap the first and last channel on the way in and out.
+    let swap = |[a, g, b]: [__m256i; 3]| if bgr { [b, g, a] } else { [a, g, b] };
+    let mut n = 0;
+    for (s, d) in src.chunks_exact(96).zip(dst.chunks_exact_mut(96)) {
+        store3(d, swap(luma_blend_block(keep, luma, swap(load3(s)))));
+        n += 32;
+    }
+    n
+}
+
+/// 32 pixels' red, green and blue of [`luma_blend_planes`], a vector each.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn luma_blend_block(keep: super::Split16, luma: super::Split16, x: [__m256i; 3]) -> [__m256i; 3] {
     let splat = |v: u16| _mm256_set1_epi16(v as i16);
     let (ka, kb, la, lb) = (
         splat(keep.a),
@@ -118,25 +175,16 @@ fn luma_blend_planes_avx2(
         let y = _mm256_add_epi16(_mm256_add_epi16(hi, c128), _mm256_srli_epi16::<8>(lo));
         let y = _mm256_srli_epi16::<8>(y);
         let ly = _mm256_add_epi16(split(y, la, lb), c128);
-        [rv, gv, bv].map(|v| _mm256_srli_epi16::<8>(_mm256_add_epi16(split(v, ka, kb), ly)))
-    };
-    let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
-    for i in (0..n).step_by(32) {
-        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
-        let x = [&*r, &*g, &*b].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
-        let lo = blend(x.map(|v| _mm256_unpacklo_epi8(v, zero)));
-        let hi = blend(x.map(|v| _mm256_unpackhi_epi8(v, zero)));
-        for (plane, (lo, hi)) in [&mut *r, &mut *g, &mut *b]
-            .into_iter()
-            .zip(lo.into_iter().zip(hi))
-        {
-            // At most 255 per lane: the pack keeps it and undoes the unpacks' order.
-            let bytes = _mm256_packus_epi16(lo, hi);
-            // SAFETY: as the loads.
-            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
+        let mut out = [rv, gv, bv];
+        for v in &mut out {
+            *v = _mm256_srli_epi16::<8>(_mm256_add_epi16(split(*v, ka, kb), ly));
         }
-    }
-    n
+        out
+    };
+    let lo = blend([x[0], x[1], x[2]].map(|v| _mm256_unpacklo_epi8(v, zero)));
+    let hi = blend([x[0], x[1], x[2]].map(|v| _mm256_unpackhi_epi8(v, zero)));
+    // At most 255 per lane: the pack keeps it and undoes the unpacks' order.
+    [0, 1, 2].map(|c| _mm256_packus_epi16(lo[c], hi[c]))
 }
 
 /// C-C4/C-C5's HSV value scale ([`super::scale_value`]) over byte planes of red, green and blue,

@@ -224,7 +224,16 @@ wide_fn! {
         planes: &mut [u8],
         dst: &mut [u8],
     ) {
-        let w = planes.len() / 3;
+        // RGB and BGR rows' whole blocks straight from row to row, the rest through planes.
+        let direct = match format {
+            PixelFormat::Rgb8 | PixelFormat::Bgr8 => {
+                let bgr = format == PixelFormat::Bgr8;
+                super::avx2::luma_blend_rgb(narrow.0, narrow.1, bgr, src, dst)
+            }
+            _ => 0,
+        };
+        let (src, dst) = (&src[3 * direct..], &mut dst[3 * direct..]);
+        let w = planes.len() / 3 - direct;
         let [r, g, b] = three_planes(planes, w);
         split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
         let done = super::avx2::luma_blend_planes(narrow.0, narrow.1, r, g, b);
