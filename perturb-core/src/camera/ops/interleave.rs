@@ -9,8 +9,11 @@
 //! instructions each way for 32 pixels, loads and stores included. Only bytes move (a test
 //! compares both ways with the plain loops).
 //!
-//! Unsafe code is allowed in this module for the unaligned loads and stores of the 96 bytes,
-//! which the callers guarantee are inside their rows.
+//! [`plane_blocks`] and [`pixel_blocks`] run a kernel of 32 pixels (three vectors) over planes or
+//! over a row.
+//!
+//! Unsafe code is allowed in this module for unaligned loads and stores whose offsets are
+//! checked to stay inside their slices (each says why).
 #![allow(unsafe_code)]
 
 #[cfg(target_arch = "x86_64")]
@@ -84,7 +87,7 @@ fn table(t: &[u8; 32]) -> __m256i {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-pub(crate) fn load3(src: &[u8]) -> [__m256i; 3] {
+fn load3(src: &[u8]) -> [__m256i; 3] {
     assert!(src.len() >= 96, "32 pixels of 3 bytes");
     // SAFETY: the three 32-byte loads read bytes 0..96 of `src`, checked above.
     let [a, b, c] =
@@ -108,7 +111,7 @@ pub(crate) fn load3(src: &[u8]) -> [__m256i; 3] {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-pub(crate) fn store3(dst: &mut [u8], channels: [__m256i; 3]) {
+fn store3(dst: &mut [u8], channels: [__m256i; 3]) {
     assert!(dst.len() >= 96, "32 pixels of 3 bytes");
     let (pick, spread) = &STORE;
     // Each channel's bytes at the positions they take in the pieces.
@@ -129,6 +132,45 @@ pub(crate) fn store3(dst: &mut [u8], channels: [__m256i; 3]) {
         // SAFETY: the three 32-byte stores write bytes 0..96 of `dst`, checked above.
         unsafe { _mm256_storeu_si256(dst.as_mut_ptr().add(at).cast(), v) };
     }
+}
+
+/// Runs `block` on every whole 32-pixel block of three byte planes, in place (one vector per
+/// plane); returns the pixels done.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn plane_blocks(
+    [a, b, c]: [&mut [u8]; 3],
+    mut block: impl FnMut([__m256i; 3]) -> [__m256i; 3],
+) -> usize {
+    let n = a.len().min(b.len()).min(c.len()) / 32 * 32;
+    for i in (0..n).step_by(32) {
+        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
+        let x = [&*a, &*b, &*c].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
+        for (plane, bytes) in [&mut *a, &mut *b, &mut *c].into_iter().zip(block(x)) {
+            // SAFETY: as the loads.
+            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
+        }
+    }
+    n
+}
+
+/// Runs `block` on every whole 32-pixel block of a row of 3-byte pixels, `src` to `dst`, the
+/// channels taken apart by [`load3`] and put back by [`store3`]; returns the pixels done.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn pixel_blocks(
+    src: &[u8],
+    dst: &mut [u8],
+    mut block: impl FnMut([__m256i; 3]) -> [__m256i; 3],
+) -> usize {
+    let mut n = 0;
+    for (s, d) in src.chunks_exact(96).zip(dst.chunks_exact_mut(96)) {
+        store3(d, block(load3(s)));
+        n += 32;
+    }
+    n
 }
 
 #[cfg(all(test, target_arch = "x86_64"))]

@@ -19,7 +19,7 @@ pub use float_image::*;
 pub use gaussian::*;
 pub use hsv::*;
 #[cfg(target_arch = "x86_64")]
-pub(crate) use interleave::{load3, store3};
+pub(crate) use interleave::{pixel_blocks, plane_blocks};
 pub use rows::*;
 pub(crate) use simd::wide_fn;
 pub use simd::*;

@@ -20,6 +20,8 @@
 #![allow(unsafe_code)]
 
 #[cfg(target_arch = "x86_64")]
+use crate::camera::ops::{pixel_blocks, plane_blocks};
+#[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
 /// What [`patched`] computes per byte before the patches (see `ByteMap`'s forms).
@@ -92,17 +94,7 @@ fn luma_blend_planes_avx2(
     g: &mut [u8],
     b: &mut [u8],
 ) -> usize {
-    let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
-    for i in (0..n).step_by(32) {
-        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
-        let x = [&*r, &*g, &*b].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
-        let out = luma_blend_block(keep, luma, x);
-        for (plane, bytes) in [&mut *r, &mut *g, &mut *b].into_iter().zip(out) {
-            // SAFETY: as the loads.
-            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
-        }
-    }
-    n
+    plane_blocks([r, g, b], |x| luma_blend_block(keep, luma, x))
 }
 
 /// [`luma_blend_planes`] on the whole 32-pixel blocks of a row of 3-byte pixels, `src` to `dst`
@@ -133,15 +125,9 @@ fn luma_blend_rgb_avx2(
     src: &[u8],
     dst: &mut [u8],
 ) -> usize {
-    use crate::camera::ops::{load3, store3};
     // Blue-first rows swap the first and last channel on the way in and out.
     let swap = |[a, g, b]: [__m256i; 3]| if bgr { [b, g, a] } else { [a, g, b] };
-    let mut n = 0;
-    for (s, d) in src.chunks_exact(96).zip(dst.chunks_exact_mut(96)) {
-        store3(d, swap(luma_blend_block(keep, luma, swap(load3(s)))));
-        n += 32;
-    }
-    n
+    pixel_blocks(src, dst, |x| swap(luma_blend_block(keep, luma, swap(x))))
 }
 
 /// 32 pixels' red, green and blue of [`luma_blend_planes`], a vector each.
@@ -230,31 +216,13 @@ pub(super) fn value_scale_rgb(f: f32, src: &[u8], dst: &mut [u8]) -> usize {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn value_scale_rgb_avx2(f: f32, src: &[u8], dst: &mut [u8]) -> usize {
-    use crate::camera::ops::{load3, store3};
-    let mut n = 0;
-    for (s, d) in src.chunks_exact(96).zip(dst.chunks_exact_mut(96)) {
-        store3(d, value_scale_block(f, load3(s)));
-        n += 32;
-    }
-    n
+    pixel_blocks(src, dst, |x| value_scale_block(f, x))
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn value_scale_planes_avx2(f: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) -> usize {
-    let n = r.len().min(g.len()).min(b.len()) / 32 * 32;
-    for i in (0..n).step_by(32) {
-        // SAFETY: `i + 32 <= n`, within each plane: the 32-byte loads and stores stay inside.
-        let x = [&*r, &*g, &*b].map(|p| unsafe { _mm256_loadu_si256(p.as_ptr().add(i).cast()) });
-        for (plane, bytes) in [&mut *r, &mut *g, &mut *b]
-            .into_iter()
-            .zip(value_scale_block(f, x))
-        {
-            // SAFETY: as the loads.
-            unsafe { _mm256_storeu_si256(plane.as_mut_ptr().add(i).cast(), bytes) };
-        }
-    }
-    n
+    plane_blocks([r, g, b], |x| value_scale_block(f, x))
 }
 
 /// 32 pixels' channels of [`value_scale_planes`], a vector each.
