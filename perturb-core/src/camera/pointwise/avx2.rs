@@ -176,7 +176,7 @@ fn luma_blend_block(keep: super::Split16, luma: super::Split16, x: [__m256i; 3])
 /// C-C4/C-C5's HSV value scale ([`super::scale_value`]) over byte planes of red, green and blue,
 /// in place, 32 pixels at a time; returns the pixels written (none for a factor `f` that is not
 /// finite). Per pixel, in float lanes, the new value `V' = min(255, floor(V f))` with the scalar
-/// code's operations and the gain `K = floor(V' 2^17 / V) + 1` (one division; [`value_gain`]);
+/// code's operations and the gain `K = floor(V' 2^17 / V) + 1` (one division, as `value_gain`);
 /// then each channel in 16-bit lanes is `(c K + 2^16) >> 17`: with `K = 2^16 hi + lo`, the
 /// rounded half of `c hi + ((c lo) >> 16)` (the low half of `c lo` is below `2^16`, the `+ 2^16`
 /// a `+ 1` before the halving): one multiply, one multiply-high and one average. That is

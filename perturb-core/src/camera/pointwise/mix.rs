@@ -171,9 +171,9 @@ impl LumaBlend {
         }
     }
 
-    /// [`Self::row`] through byte planes in 16-bit lanes where the tables have that form and the
-    /// CPU has AVX2 (`planes` grows to three bytes per pixel and can be reused from row to row);
-    /// the same bytes.
+    /// [`Self::row`] in 16-bit lanes where the tables have that form and the CPU has AVX2 (RGB
+    /// and BGR rows row to row, other layouts through byte planes: `planes` grows to three bytes
+    /// per pixel and can be reused from row to row); the same bytes.
     pub fn row_in(&self, format: PixelFormat, src: &[u8], dst: &mut [u8], planes: &mut Vec<u8>) {
         let Some((keep, luma)) = self.narrow else {
             return self.row(format, src, dst);
@@ -214,8 +214,9 @@ wide_fn! {
 }
 
 wide_fn! {
-    /// [`LumaBlend::row_in`]: the row split into the three byte planes of `planes`, blended 32
-    /// pixels at a time in 16-bit lanes (the rest pixel by pixel), merged back; alpha copied.
+    /// [`LumaBlend::row_in`]: blended 32 pixels at a time in 16-bit lanes, straight from row to
+    /// row for RGB and BGR, otherwise (and for the tail) with the row split into the three byte
+    /// planes of `planes` and merged back (the last pixels one by one); alpha copied.
     fn luma_blend_planar(
         m: LumaBlend,
         narrow: (Split16, Split16),
