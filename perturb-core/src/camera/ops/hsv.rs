@@ -267,15 +267,23 @@ fn whole_byte(x: f64) -> u8 {
 }
 
 wide_fn! {
-    /// [`SaturationMap::row_in`]: the row split into the three byte planes of `planes`, scaled
-    /// by [`saturation_planes`], merged back; alpha copied. (The split and the merge are
-    /// stride-3 loops, which vectorise far better in the AVX2 copy.)
+    /// [`SaturationMap::row_in`]: RGB and BGR rows' whole 32-pixel blocks straight from row to
+    /// row by the AVX2 kernel ([`super::hsv_avx2`], which treats the channels alike), the rest of
+    /// the row split into the three byte planes of `planes`, scaled by the kernel's planes form
+    /// and [`saturation_planes`], merged back; alpha copied. (The split and the merge are stride-3
+    /// loops, which vectorise far better in the AVX2 copy.)
     fn saturation_planar(m: f32, format: PixelFormat, src: &[u8], planes: &mut [u8], dst: &mut [u8]) {
-        let w = planes.len() / 3;
+        let direct = match format {
+            PixelFormat::Rgb8 | PixelFormat::Bgr8 => super::hsv_avx2::saturation_rgb(m, src, dst),
+            _ => 0,
+        };
+        let (rest_src, rest_dst) = (&src[3 * direct..], &mut dst[3 * direct..]);
+        let w = planes.len() / 3 - direct;
         let [r, g, b] = three_planes(planes, w);
-        split_rgb_bytes(src, format, [&mut *r, &mut *g, &mut *b]);
-        saturation_planes(m, r, g, b);
-        merge_rgb(format, [&*r, &*g, &*b], dst);
+        split_rgb_bytes(rest_src, format, [&mut *r, &mut *g, &mut *b]);
+        let done = super::hsv_avx2::saturation_planes(m, r, g, b);
+        saturation_planes(m, &mut r[done..], &mut g[done..], &mut b[done..]);
+        merge_rgb(format, [&*r, &*g, &*b], rest_dst);
         copy_alpha(format, src, dst);
     }
 }
@@ -331,41 +339,70 @@ mod tests {
     use super::*;
     use crate::image::Image;
 
-    /// The float planes against the fixed-point row on every RGB colour, for the saturation
-    /// factors of C-F6 and C-F8 and the ends of the accepted range.
+    /// The float planes and the AVX2 kernel (planes and row to row) against the fixed-point
+    /// row on every RGB colour, for the saturation factors of C-F6 and C-F8 and the ends of the
+    /// accepted range. Without AVX2 the kernel writes nothing (checked too).
     #[test]
     fn float_saturation_planes_give_the_fixed_point_bytes_on_every_colour() {
         let factors = crate::camera::color::SATURATION_INCREASE
             .into_iter()
             .chain(crate::camera::color::SATURATION_DECREASE)
-            .chain([0.0, 0.5, 1.0, 2.0, 7.5]);
-        let (mut r, mut g, mut b) = (vec![0u8; 256], vec![0u8; 256], vec![0u8; 256]);
+            .chain([0.0, 0.5, 1.0, 2.0, 7.5, 300.0]);
+        let wide = super::super::wide_available();
+        let mut planes = [[0u8; 256]; 3];
+        let mut kernel = [[0u8; 256]; 3];
         let mut src = vec![0u8; 3 * 256];
         let mut want = vec![0u8; 3 * 256];
+        let mut direct = vec![0u8; 3 * 256];
         for m in factors {
             let map = SaturationMap::scaled(m);
             assert_eq!(map.factor, Some(m));
             for hi in 0..=255u8 {
                 for mid in 0..=255u8 {
+                    // Each 32-pixel block puts the largest channel in another place.
                     for lo in 0..=255u8 {
                         let i = lo as usize;
-                        (r[i], g[i], b[i]) = (hi, mid, lo);
-                        src[3 * i..3 * i + 3].copy_from_slice(&[hi, mid, lo]);
+                        let mut p = [hi, mid, lo];
+                        p.rotate_left(i / 32 % 3);
+                        for k in 0..3 {
+                            (planes[k][i], kernel[k][i]) = (p[k], p[k]);
+                        }
+                        src[3 * i..3 * i + 3].copy_from_slice(&p);
                     }
                     map.row(PixelFormat::Rgb8, &src, &mut want);
-                    saturation_planes(m, &mut r, &mut g, &mut b);
+                    let [r, g, b] = &mut planes;
+                    saturation_planes(m, r, g, b);
+                    let [kr, kg, kb] = &mut kernel;
+                    let done = super::super::hsv_avx2::saturation_planes(m, kr, kg, kb);
+                    assert_eq!(done, if wide { 256 } else { 0 });
+                    let rows = super::super::hsv_avx2::saturation_rgb(m, &src, &mut direct);
+                    assert_eq!(rows, done);
                     for i in 0..256 {
-                        assert_eq!(
-                            [r[i], g[i], b[i]],
-                            [want[3 * i], want[3 * i + 1], want[3 * i + 2]],
-                            "m {m}: rgb {:?}",
-                            &src[3 * i..3 * i + 3]
-                        );
+                        let want = &want[3 * i..3 * i + 3];
+                        let p = &src[3 * i..3 * i + 3];
+                        let at = |x: &[[u8; 256]; 3]| [x[0][i], x[1][i], x[2][i]];
+                        assert_eq!(at(&planes), want, "m {m}: rgb {p:?}");
+                        if wide {
+                            assert_eq!(at(&kernel), want, "kernel, m {m}: rgb {p:?}");
+                            assert_eq!(&direct[3 * i..3 * i + 3], want, "row: m {m}: rgb {p:?}");
+                        }
                     }
                 }
             }
         }
         assert_eq!(SaturationMap::scaled(-1.0).factor, None);
+    }
+
+    #[test]
+    fn ties_up_marks_where_the_rounded_reciprocal_is_not_below_the_quotient() {
+        let recip = reciprocals();
+        for n in 1..256u64 {
+            let bit = super::super::hsv_avx2::TIES_UP[n as usize / 32] >> (n % 32) & 1;
+            assert_eq!(bit == 1, recip[n as usize] * n >= 1 << 32, "n {n}");
+        }
+        // Powers of two divide 2^32 exactly; 3's reciprocal rounds down, 6's up.
+        let bit = |n: usize| super::super::hsv_avx2::TIES_UP[n / 32] >> (n % 32) & 1;
+        assert_eq!([1, 2, 3, 6, 128].map(bit), [1, 1, 0, 1, 1]);
     }
 
     #[test]

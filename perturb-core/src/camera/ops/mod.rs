@@ -7,6 +7,7 @@ mod filter;
 mod float_image;
 mod gaussian;
 mod hsv;
+mod hsv_avx2;
 mod interleave;
 mod rows;
 mod simd;
