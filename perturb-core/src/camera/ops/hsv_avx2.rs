@@ -66,13 +66,13 @@ pub(super) fn saturation_planes(m: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn saturation_rgb_avx2(m: f32, src: &[u8], dst: &mut [u8]) -> usize {
-    pixel_blocks(src, dst, |x| saturation_block(m, x))
+    pixel_blocks(src, dst, |x| saturation_block::<true>(m, x))
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn saturation_planes_avx2(m: f32, r: &mut [u8], g: &mut [u8], b: &mut [u8]) -> usize {
-    plane_blocks([r, g, b], |x| saturation_block(m, x))
+    plane_blocks([r, g, b], |x| saturation_block::<false>(m, x))
 }
 
 /// 0 or 1 per 32-bit lane: bit `n` of [`TIES_UP`] for `n` in 0..=255.
@@ -88,10 +88,15 @@ fn ties_up(bits: __m256i, n: __m256i) -> __m256i {
 /// 32 pixels' channels, a vector each, mapped as [`saturation_rgb`] does: eight pixels at a
 /// time [`saturation_group`] gives how far each channel moves down from the value `V`, and the
 /// bytes are `V` minus that, saturating at 0.
+///
+/// `ROWS` only tells apart the copies for rows and for planes: each then has one caller, which
+/// the compiler inlines it into whatever its tuning (called once per block instead, it gets
+/// and returns its vectors through memory, about 15 % slower; a build for this VM's own CPU did
+/// that to the one shared copy).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn saturation_block(m: f32, x: [__m256i; 3]) -> [__m256i; 3] {
+fn saturation_block<const ROWS: bool>(m: f32, x: [__m256i; 3]) -> [__m256i; 3] {
     // SAFETY: `TIES_UP` is 32 bytes, the size of the unaligned load.
     let bits = unsafe { _mm256_loadu_si256(TIES_UP.as_ptr().cast()) };
     let m = _mm256_set1_ps(m);
