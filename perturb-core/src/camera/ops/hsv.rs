@@ -106,15 +106,15 @@ where
 /// a multiplication.
 pub fn reciprocals() -> &'static [u64; 256] {
     static R: std::sync::OnceLock<[u64; 256]> = std::sync::OnceLock::new();
-    R.get_or_init(|| {
-        std::array::from_fn(|v| {
-            if v == 0 {
-                0
-            } else {
-                ((1u64 << 32) + v as u64 / 2) / v as u64
-            }
-        })
-    })
+    R.get_or_init(|| std::array::from_fn(|v| rounded_reciprocal(v as u64)))
+}
+
+/// `round(2^32 / v)` for `v >= 1` (halves up), 0 for `v = 0`: one entry of [`reciprocals`].
+pub(super) const fn rounded_reciprocal(v: u64) -> u64 {
+    match ((1u64 << 32) + v / 2).checked_div(v) {
+        Some(r) => r,
+        None => 0,
+    }
 }
 
 /// Changes the HSV value of every pixel and keeps hue and saturation, in RGB directly: each colour
@@ -396,12 +396,11 @@ mod tests {
     #[test]
     fn ties_up_marks_where_the_rounded_reciprocal_is_not_below_the_quotient() {
         let recip = reciprocals();
-        for n in 1..256u64 {
-            let bit = super::super::hsv_avx2::TIES_UP[n as usize / 32] >> (n % 32) & 1;
-            assert_eq!(bit == 1, recip[n as usize] * n >= 1 << 32, "n {n}");
+        let bit = |n: usize| super::super::hsv_avx2::TIES_UP[n / 32] >> (n % 32) & 1;
+        for (n, &r) in recip.iter().enumerate().skip(1) {
+            assert_eq!(bit(n) == 1, r * n as u64 >= 1 << 32, "n {n}");
         }
         // Powers of two divide 2^32 exactly; 3's reciprocal rounds down, 6's up.
-        let bit = |n: usize| super::super::hsv_avx2::TIES_UP[n / 32] >> (n % 32) & 1;
         assert_eq!([1, 2, 3, 6, 128].map(bit), [1, 1, 0, 1, 1]);
     }
 

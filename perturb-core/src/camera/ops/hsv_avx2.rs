@@ -29,8 +29,7 @@ pub(super) const TIES_UP: [u32; 8] = {
     let mut bits = [0u32; 8];
     let mut n = 1u64;
     while n < 256 {
-        let reciprocal = ((1u64 << 32) + n / 2) / n;
-        if reciprocal * n >= 1 << 32 {
+        if super::hsv::rounded_reciprocal(n) * n >= 1 << 32 {
             bits[(n / 32) as usize] |= 1 << (n % 32);
         }
         n += 1;
