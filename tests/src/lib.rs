@@ -584,3 +584,60 @@ pub fn ros1_lines(mut r: impl BufRead, child: &mut Child) -> Vec<serde_json::Val
     let _ = child.wait();
     out
 }
+
+/// What the roscpp publisher of the tests needs (Debian's packages).
+pub const ROSCPP_PACKAGES: &str =
+    "g++ and Debian's roscpp headers (apt-get install g++ libroscpp-dev libsensor-msgs-dev)";
+
+/// The roscpp publisher of the tests (`tests/support/ros1_cpp_pub.cpp`), built once with g++
+/// against Debian's roscpp into the target directory (rebuilt when its source is newer). `None`
+/// (with a message) when g++ or the headers are missing; a failure under
+/// `PERTURB_REQUIRE_ORACLES=1` (CI).
+pub fn roscpp_publisher() -> Option<PathBuf> {
+    let src = workspace().join("tests/support/ros1_cpp_pub.cpp");
+    // target/<profile>/perturb -> target/
+    let target = exe("perturb")
+        .parent()
+        .and_then(Path::parent)
+        .map(Path::to_path_buf)
+        .unwrap_or_else(std::env::temp_dir);
+    let dir = target.join("roscpp");
+    let bin = dir.join("ros1_cpp_pub");
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    if bin.exists() && modified(&bin) >= modified(&src) {
+        return Some(bin);
+    }
+    std::fs::create_dir_all(&dir).expect("target/roscpp");
+    // Built under another name and renamed: concurrent tests never run a half-written binary.
+    let tmp = dir.join(format!("ros1_cpp_pub.{}", std::process::id()));
+    let out = Command::new("g++")
+        .args(["-O1", "-o"])
+        .arg(&tmp)
+        .arg(&src)
+        .args([
+            "-lroscpp",
+            "-lrostime",
+            "-lroscpp_serialization",
+            "-lcpp_common",
+            "-lrosconsole",
+        ])
+        .output();
+    let why = match out {
+        Ok(o) if o.status.success() => {
+            std::fs::rename(&tmp, &bin).expect("installing the roscpp publisher");
+            return Some(bin);
+        }
+        Ok(o) => String::from_utf8_lossy(&o.stderr)
+            .lines()
+            .take(5)
+            .collect::<Vec<_>>()
+            .join("\n"),
+        Err(e) => format!("cannot run g++: {e}"),
+    };
+    assert!(
+        std::env::var("PERTURB_REQUIRE_ORACLES").ok().as_deref() != Some("1"),
+        "{ROSCPP_PACKAGES} are needed and PERTURB_REQUIRE_ORACLES=1: {why}"
+    );
+    eprintln!("SKIP: {ROSCPP_PACKAGES} are missing: {why}");
+    None
+}

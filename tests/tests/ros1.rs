@@ -520,6 +520,220 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
     assert_eq!(egress["forwarded"], 10, "{egress}");
 }
 
+/// The largest gap between two consecutive arrivals (`t_arrival_ns` of a rospy subscriber), ms.
+fn largest_gap_ms(got: &[Value]) -> f64 {
+    let mut t: Vec<u64> = got
+        .iter()
+        .filter_map(|g| g["t_arrival_ns"].as_u64())
+        .collect();
+    t.sort_unstable();
+    t.windows(2)
+        .map(|w| (w[1] - w[0]) as f64 / 1e6)
+        .fold(0.0, f64::max)
+}
+
+/// A ROS 1 master restart mid-stream, with rospy and roscpp sensor publishers that (as ROS 1
+/// nodes do) never register with the new master: the bridge registers again, keeps its working
+/// links to both publishers and to its subscribers, and picks up a publisher that appears after
+/// the restart. Every frame arrives or is counted (bridge report, `perturb ctl stats`).
+#[test]
+fn ros1_links_outlive_a_master_restart_with_rospy_and_roscpp_publishers() {
+    if !have_ros1() {
+        return;
+    }
+    let Some(cpp_pub) = perturb_tests::roscpp_publisher() else {
+        return;
+    };
+    let ns = Namespace::new("ros1-master-restart");
+    let mut master = Ros1Master::start(&ns.dir);
+    let daemon_cfg = ns.dir.join("perturbd.toml");
+    std::fs::write(
+        &daemon_cfg,
+        "[[streams]]\nname = \"cam_py\"\nmodality = \"camera\"\n\n\
+         [[streams]]\nname = \"cam_cpp\"\nmodality = \"camera\"\n",
+    )
+    .unwrap();
+    let report = ns.dir.join("report.json");
+    let bridge_cfg = ns.dir.join("bridge.toml");
+    std::fs::write(
+        &bridge_cfg,
+        format!(
+            "[bridge]\nname = \"ros1_restart\"\nreport = \"{}\"\n\n[ros1]\nhostname = \"127.0.0.1\"\n\n\
+             [[ingress]]\ntopic = \"/sensors/py/image_raw\"\ntype = \"image\"\nstream = \"cam_py\"\ntransport = \"ros1\"\n\n\
+             [[ingress]]\ntopic = \"/sensors/cpp/image_raw\"\ntype = \"image\"\nstream = \"cam_cpp\"\ntransport = \"ros1\"\n\n\
+             [[egress]]\nstream = \"cam_py\"\ntopic = \"/relayed/py\"\ntransport = \"ros1\"\n\n\
+             [[egress]]\nstream = \"cam_cpp\"\ntopic = \"/relayed/cpp\"\ntransport = \"ros1\"\n",
+            report.display()
+        ),
+    )
+    .unwrap();
+    let mut daemon = ns.start_daemon(&daemon_cfg);
+    let mut bridge = start_bridge(&ns, &master, &bridge_cfg, "bridge.log");
+    assert!(
+        wait_for(Duration::from_secs(20), || rostopic_list(&master, "-p")
+            .contains("/relayed/cpp")),
+        "the bridge did not register:\n{}",
+        log_of(&ns, "bridge.log")
+    );
+    // 8 s at 20 Hz from each publisher; the master restarts after about 3 s; a late publisher
+    // adds 10 frames on the rospy topic after the restart.
+    const N: usize = 160;
+    const LATE: usize = 10;
+    let sub = |topic: &str, count: usize, name: &str| {
+        let mut c = ros1_peer(
+            &master,
+            &[
+                "sub",
+                "--topic",
+                topic,
+                "--type",
+                "image",
+                "--count",
+                &count.to_string(),
+                "--timeout",
+                "60",
+                "--name",
+                name,
+            ],
+        );
+        let r = ros1_ready(&mut c);
+        (c, r)
+    };
+    let (mut sub_py, r_py) = sub("/relayed/py", N + LATE, "py");
+    let (mut sub_cpp, r_cpp) = sub("/relayed/cpp", N, "cpp");
+    std::thread::sleep(Duration::from_secs(1));
+    let mut pub_py = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/sensors/py/image_raw",
+            "--type",
+            "image",
+            "--count",
+            &N.to_string(),
+            "--rate",
+            "20",
+            "--size",
+            "64x48",
+            "--name",
+            "py",
+        ],
+    );
+    let mut pub_cpp = master
+        .command(&cpp_pub)
+        .args([
+            "/sensors/cpp/image_raw",
+            &N.to_string(),
+            "20",
+            "64",
+            "48",
+            "rgb8",
+            "1000",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("starting the roscpp publisher");
+    std::thread::sleep(Duration::from_secs(3));
+    let down = Instant::now();
+    master.down();
+    master.up();
+    let back = Instant::now();
+    assert!(
+        wait_for(Duration::from_secs(20), || rostopic_list(&master, "-p")
+            .contains("/relayed/py")),
+        "the bridge did not register with the new master:\n{}",
+        log_of(&ns, "bridge.log")
+    );
+    let registered_after = back.elapsed();
+    let mut late = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/sensors/py/image_raw",
+            "--type",
+            "image",
+            "--count",
+            &LATE.to_string(),
+            "--rate",
+            "20",
+            "--size",
+            "64x48",
+            "--name",
+            "late",
+            "--stamp-base",
+            "1900000000",
+        ],
+    );
+    let sent_py = ros1_lines(
+        std::io::BufReader::new(pub_py.stdout.take().unwrap()),
+        &mut pub_py,
+    );
+    let sent_cpp = ros1_lines(
+        std::io::BufReader::new(pub_cpp.stdout.take().unwrap()),
+        &mut pub_cpp,
+    );
+    let sent_late = ros1_lines(
+        std::io::BufReader::new(late.stdout.take().unwrap()),
+        &mut late,
+    );
+    let got_py = ros1_lines(r_py, &mut sub_py);
+    let got_cpp = ros1_lines(r_cpp, &mut sub_cpp);
+    let log = log_of(&ns, "bridge.log");
+    assert_eq!(
+        (sent_py.len(), sent_cpp.len(), sent_late.len()),
+        (N, N, LATE)
+    );
+    assert_eq!(
+        got_cpp.len(),
+        N,
+        "roscpp frames lost across the restart:\n{log}"
+    );
+    assert_eq!(
+        got_py.len(),
+        N + LATE,
+        "rospy frames lost across the restart:\n{log}"
+    );
+    // The rospy and roscpp links carried frames through the master's absence.
+    let (gap_py, gap_cpp) = (largest_gap_ms(&got_py[..N]), largest_gap_ms(&got_cpp));
+    eprintln!(
+        "master down for {:.1} s, bridge registered {:.2} s after the new master listened; \
+         largest gap between frames: rospy {gap_py:.0} ms, roscpp {gap_cpp:.0} ms",
+        (back - down).as_secs_f64(),
+        registered_after.as_secs_f64()
+    );
+    assert!(
+        gap_py < 2000.0 && gap_cpp < 2000.0,
+        "frames stopped: {gap_py} / {gap_cpp} ms"
+    );
+    assert!(interrupt(&mut bridge), "{}", log_of(&ns, "bridge.log"));
+    let stats = ns.stats();
+    let d = daemon.stop();
+    let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    for (stream, topic, n) in [
+        ("cam_py", "/sensors/py/image_raw", N + LATE),
+        ("cam_cpp", "/sensors/cpp/image_raw", N),
+    ] {
+        let ingress = rep
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"].as_str().unwrap().contains(topic))
+            .unwrap();
+        assert_eq!(ingress["received"], n as u64, "{ingress}");
+        assert_eq!(ingress["lost"], 0, "{ingress}");
+        let s = stats
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["name"] == stream)
+            .unwrap_or_else(|| panic!("no stream {stream} in {stats}"));
+        assert_eq!(s["frames_in"], n as u64, "{stream}: {s}\n{d}");
+    }
+}
+
 #[test]
 fn ros1_rosbag_record_bag_replays_through_perturbd_with_clock() {
     if !have_ros1() || !have_rosbags() {

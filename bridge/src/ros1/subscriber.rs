@@ -1,10 +1,14 @@
 //! Subscriptions: one thread per publisher (`requestTopic`, connect, exchange headers, then read
 //! messages into recycled buffers), all feeding one bounded queue that the reader takes from.
 //! The publisher list comes from the master (`registerSubscriber`, then `publisherUpdate`): a
-//! new publisher is connected, one that left is disconnected, and a link that breaks while its
-//! publisher is still listed is retried (every 0.5 s, backing off to 5 s). A publisher that
-//! refuses the connection with an `error` header (another type or md5sum) is reported and not
-//! retried.
+//! new publisher is connected, and a link that breaks while its publisher is still listed is
+//! retried (every 0.5 s, backing off to 5 s). A publisher the list no longer names is
+//! disconnected only if its link is not working: a master that restarted knows none of the
+//! nodes that registered with the old one (rospy and roscpp do not register again), so its list
+//! is empty or partial while their links still carry messages. Such a link stays until its
+//! connection ends (the publisher went away); it is then not retried. This is what ROS 1 itself
+//! promises: links outlive the master. A publisher that refuses the connection with an `error`
+//! header (another type or md5sum) is reported and not retried.
 
 use super::node::{CALL_TIMEOUT, Shared, ros_value};
 use super::tcpros;
@@ -33,6 +37,9 @@ struct Link {
     id: u32,
     stop: AtomicBool,
     connected: AtomicBool,
+    /// True while the master's latest list names the publisher; an unlisted link lives on while
+    /// it is connected and is not retried once it breaks.
+    listed: AtomicBool,
     stream: Mutex<Option<TcpStream>>,
 }
 
@@ -71,12 +78,19 @@ impl SubShared {
             return;
         };
         links.retain(|uri, link| {
-            let keep = uris.iter().any(|u| u.as_str() == &**uri);
-            if !keep {
-                info!(topic = %self.topic, publisher = %uri, "ROS 1 publisher left");
-                link.kill();
+            let listed = uris.iter().any(|u| u.as_str() == &**uri);
+            link.listed.store(listed, Ordering::Relaxed);
+            if listed {
+                return true;
             }
-            keep
+            if link.connected.load(Ordering::Relaxed) {
+                // A restarted master does not know this publisher, which still sends: keep it.
+                debug!(topic = %self.topic, publisher = %uri, "publisher not listed by the master, link kept while it works");
+                return true;
+            }
+            info!(topic = %self.topic, publisher = %uri, "ROS 1 publisher left");
+            link.kill();
+            false
         });
         for uri in uris {
             if links.contains_key(uri.as_str()) || *uri == node.api_uri {
@@ -87,6 +101,7 @@ impl SubShared {
                 id: node.next_conn_id.fetch_add(1, Ordering::Relaxed),
                 stop: AtomicBool::new(false),
                 connected: AtomicBool::new(false),
+                listed: AtomicBool::new(true),
                 stream: Mutex::new(None),
             });
             links.insert(link.uri.clone(), link.clone());
@@ -127,6 +142,12 @@ impl SubShared {
                 }
             }
             link.connected.store(false, Ordering::Relaxed);
+            if !link.listed.load(Ordering::Relaxed) {
+                // Kept only because it worked while the master did not list it: it ended.
+                info!(topic = %self.topic, publisher = %link.uri, "ROS 1 publisher left (its link ended; the master does not list it)");
+                self.forget(link);
+                break;
+            }
             let end = std::time::Instant::now() + backoff;
             while std::time::Instant::now() < end
                 && !link.stop.load(Ordering::Relaxed)
@@ -137,6 +158,17 @@ impl SubShared {
             backoff = (backoff * 2).min(Duration::from_secs(5));
         }
         link.connected.store(false, Ordering::Relaxed);
+    }
+
+    /// Removes `link` from the links (if it is still the one kept for its publisher).
+    fn forget(&self, link: &Link) {
+        if let Ok(mut links) = self.links.lock()
+            && links
+                .get(&link.uri)
+                .is_some_and(|l| std::ptr::eq(Arc::as_ptr(l), link))
+        {
+            links.remove(&link.uri);
+        }
     }
 
     fn connect_and_read(&self, link: &Link, node: &Shared) -> Result<(), LinkError> {
