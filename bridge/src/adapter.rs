@@ -44,6 +44,12 @@ impl Control {
         }
     }
 
+    /// Notes that a stream this adapter reads has a publisher now.
+    pub fn note_publisher(&self) {
+        self.upstream
+            .store(crate::frame::monotonic_ns(), Ordering::Relaxed);
+    }
+
     /// A context sharing `why` (the first reason given by [`Control::stop_because`]).
     pub fn with_reason(mut self, why: Arc<Mutex<Option<String>>>) -> Self {
         self.why = why;

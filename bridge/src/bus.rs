@@ -47,6 +47,27 @@ pub trait BusPublisher {
     }
 }
 
+/// A received frame kept for later: on the iceoryx2 bus a reference into shared memory (the
+/// sample is handed back when the frame is dropped), no copy. It may be sent to another thread.
+pub trait HeldFrame: Send {
+    /// The middleware's metadata (sequence number, hop stamps, applied perturbation).
+    fn meta(&self) -> &FrameMeta;
+    /// The message, borrowing the held bytes.
+    fn payload(&self) -> Payload<'_>;
+    /// Frames the source knew were lost upstream just before this one (gaps in a ROS 1
+    /// publisher's `seq`), 0 when it did not say.
+    fn lost_before(&self) -> u32 {
+        0
+    }
+    /// True if the daemon published it while its kill switch was engaged (so it is raw).
+    fn killed(&self) -> bool {
+        false
+    }
+}
+
+/// A boxed [`HeldFrame`].
+pub type Held = Box<dyn HeldFrame>;
+
 /// Receives frames from one stream side.
 pub trait BusSubscriber {
     /// Waits up to `timeout` and passes every available frame to `f`; returns how many.
@@ -56,10 +77,23 @@ pub trait BusSubscriber {
         f: &mut dyn FnMut(&FrameMeta, &Payload<'_>),
     ) -> Result<usize>;
 
+    /// Waits up to `timeout` and returns every available frame, held (see [`HeldFrame`]) so
+    /// that the caller decides later whether and when to pass it on.
+    fn recv_held(&mut self, timeout: Duration) -> Result<Vec<Held>>;
+
     /// Publishers currently connected to the stream side, when the bus knows (iceoryx2: the
     /// daemon for a perturbed side, a source bridge for a raw side).
     fn publishers(&self) -> Option<usize> {
         None
+    }
+}
+
+impl HeldFrame for Item {
+    fn meta(&self) -> &FrameMeta {
+        &self.0
+    }
+    fn payload(&self) -> Payload<'_> {
+        self.1.payload()
     }
 }
 
@@ -82,6 +116,9 @@ pub trait Bus: Send + Sync {
         kind: StreamKind,
         side: Side,
     ) -> Result<Box<dyn BusSubscriber>>;
+    /// Removes what dead processes left on the bus (iceoryx2: the ports of a process killed
+    /// with `kill -9`, which stay listed until someone sweeps them).
+    fn sweep_dead(&self) {}
 }
 
 type Item = Arc<(FrameMeta, OwnedPayload)>;
@@ -154,6 +191,17 @@ impl BusSubscriber for LocalSubscriber {
             next = self.rx.try_recv().ok();
         }
         Ok(n)
+    }
+
+    fn recv_held(&mut self, timeout: Duration) -> Result<Vec<Held>> {
+        let Ok(first) = self.rx.recv_timeout(timeout) else {
+            return Ok(Vec::new());
+        };
+        let mut out: Vec<Held> = vec![Box::new(first)];
+        while let Ok(i) = self.rx.try_recv() {
+            out.push(Box::new(i));
+        }
+        Ok(out)
     }
 }
 

@@ -123,6 +123,11 @@ pub struct FrameMeta {
     pub applied: Option<Applied>,
     /// Per-hop timestamps.
     pub hops: Hops,
+    /// Frames the source knows were lost just before this one (a ROS 1 publisher's `seq`
+    /// gap), carried to the daemon (`lost_before` in the wire header).
+    pub lost_before: u32,
+    /// The campaign step that chose the applied perturbation (1-based; 0: none).
+    pub step: u16,
 }
 
 /// An owned sensor message (synthetic frames, decoded compressed images, frames copied between

@@ -9,11 +9,16 @@
 
 use crate::adapter::{Adapter, Control, POLL};
 use crate::bus::{Bus, Side};
+use crate::camera_info::{Calibration, CameraInfoLink, ROS2_TYPE, Ros1Type, stamp_of};
 use crate::dds::{Received, RosType, TopicSpec};
 use crate::endpoint::Endpoint;
 use crate::frame::{FrameMeta, OwnedPayload, Payload, StreamKind, monotonic_ns, wall_ns};
+use crate::msgs::{SmallEndpoint, Wire};
 use crate::stats::{AdapterReport, log_bad};
+use crate::topic::Ros1Seq;
 use anyhow::Result;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// One ingress mapping.
 pub struct Ingress {
@@ -23,6 +28,60 @@ pub struct Ingress {
     pub stream: String,
     /// The DDS participant of the ingress direction, or the ROS 1 node.
     pub endpoint: Endpoint,
+    /// The stream's camera_info source topic, where it is read, and what the egress of the
+    /// stream takes it from.
+    pub camera_info: Option<(String, SmallEndpoint, Arc<CameraInfoLink>)>,
+}
+
+/// Reads the camera_info topic into `link` until `stop` (a thread beside the ingress).
+fn relay_camera_info(
+    topic: &str,
+    endpoint: &SmallEndpoint,
+    link: &CameraInfoLink,
+    stop: &AtomicBool,
+    ready: crossbeam::channel::Sender<Result<()>>,
+) -> u64 {
+    let mut reader = match endpoint.reader(topic, ROS2_TYPE, crate::dds::Qos::default(), 16) {
+        Ok(r) => {
+            let _ = ready.send(Ok(()));
+            r
+        }
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return 0;
+        }
+    };
+    let name = format!("camera_info <- {topic}");
+    let (mut got, mut bad) = (0u64, 0u64);
+    while !stop.load(Ordering::Relaxed) {
+        let r = reader.take(POLL, &mut |m| match stamp_of(m.data, m.wire) {
+            Some(stamp) => {
+                got += 1;
+                let ros1 = (m.wire == Wire::Ros1).then(|| Ros1Type {
+                    name: m.type_name.to_string(),
+                    md5sum: String::new(),
+                    definition: m.definition.unwrap_or("").to_string(),
+                });
+                link.push(
+                    Calibration {
+                        stamp,
+                        data: m.data.to_vec(),
+                        wire: m.wire,
+                    },
+                    ros1,
+                );
+            }
+            None => {
+                bad += 1;
+                log_bad(&name, bad, &"a message too short to hold a header");
+            }
+        });
+        if let Err(e) = r {
+            bad += 1;
+            log_bad(&name, bad, &e);
+        }
+    }
+    got
 }
 
 impl Adapter for Ingress {
@@ -48,19 +107,64 @@ impl Adapter for Ingress {
         };
         let mut publisher = bus.publisher(&self.stream, kind, Side::Raw)?;
         let mut reader = self.endpoint.reader(&self.spec)?;
+        let stop_info = AtomicBool::new(false);
+        std::thread::scope(|scope| -> Result<AdapterReport> {
+            let info = match &self.camera_info {
+                Some((topic, endpoint, link)) => {
+                    let (tx, rx) = crossbeam::channel::bounded(1);
+                    let stop = &stop_info;
+                    let h = std::thread::Builder::new()
+                        .name("camera-info".into())
+                        .spawn_scoped(scope, move || {
+                            relay_camera_info(topic, endpoint, link, stop, tx)
+                        })?;
+                    rx.recv()
+                        .map_err(|_| anyhow::anyhow!("the camera_info reader ended at start"))??;
+                    Some(h)
+                }
+                None => None,
+            };
+            let r = self.pump(&mut publisher, reader.as_mut(), &mut ctl, &name);
+            stop_info.store(true, Ordering::Relaxed);
+            let mut rep = r?;
+            if let (Some(h), Some((topic, _, _))) = (info, &self.camera_info) {
+                let n = h.join().unwrap_or(0);
+                rep.notes
+                    .push(format!("camera_info <- {topic}: {n} received"));
+            }
+            Ok(rep)
+        })
+    }
+}
+
+impl Ingress {
+    /// Reads the topic into the stream until stopped.
+    fn pump(
+        &self,
+        publisher: &mut Box<dyn crate::bus::BusPublisher>,
+        reader: &mut dyn crate::topic::TopicReader,
+        ctl: &mut Control,
+        name: &str,
+    ) -> Result<AdapterReport> {
+        let name = name.to_string();
         ctl.ready();
         let mut rep = AdapterReport {
             name: name.clone(),
             ..Default::default()
         };
         let mut seq = 0u64;
+        let mut lost_before = 0u32;
         while !ctl.stopped() {
             let mut handle =
-                |ros1_seq: Option<u32>, r: Result<Received<'_>, perturb_core::Error>| {
+                |ros1: Option<Ros1Seq>, r: Result<Received<'_>, perturb_core::Error>| {
                     rep.received += 1;
                     let t_source = monotonic_ns();
+                    // Lost upstream since the last frame published: this one says so.
+                    lost_before = lost_before.saturating_add(ros1.map_or(0, |s| s.lost_before));
                     let meta = FrameMeta {
-                        seq: ros1_seq.map_or(seq, u64::from),
+                        seq: ros1.map_or(seq, |s| u64::from(s.seq)),
+                        lost_before,
+                        step: 0,
                         log_time: wall_ns(),
                         applied: None,
                         hops: crate::frame::Hops {
@@ -109,6 +213,7 @@ impl Adapter for Ingress {
                         Ok(()) => {
                             rep.forwarded += 1;
                             seq += 1;
+                            lost_before = 0;
                         }
                         Err(e) => {
                             rep.failed += 1;
@@ -124,6 +229,7 @@ impl Adapter for Ingress {
         rep.undelivered = publisher.undelivered();
         rep.lost = reader.lost();
         rep.dropped = reader.dropped();
+        rep.lost_by_cause.upstream = rep.lost + rep.dropped;
         Ok(rep)
     }
 }

@@ -8,10 +8,11 @@
 //!   the shared memory. A frame whose header and payload disagree is logged, counted and
 //!   skipped.
 
-use crate::bus::{Bus, BusPublisher, BusSubscriber, Side};
+use crate::bus::{Bus, BusPublisher, BusSubscriber, Held, HeldFrame, Side};
 use crate::config::BridgeSection;
 use crate::frame::{Applied, FrameMeta, Hops, Payload, StreamKind};
 use anyhow::{Context, Result};
+use perturb_core::cloud::PointLayout;
 use perturb_core::formats::ros::{Header, ImageMsg, PointCloud2Msg};
 use perturb_wire::{
     FrameHeader, FramePublisher, FrameSubscriber, Hop, LayoutCache, Stamp, StreamQos, Transport,
@@ -63,6 +64,17 @@ impl IoxBus {
 impl Bus for IoxBus {
     fn name(&self) -> &'static str {
         "iceoryx2"
+    }
+
+    fn sweep_dead(&self) {
+        match self.transport().map(|t| t.sweep_dead_nodes()) {
+            Ok(Ok(r)) if r.removed > 0 => info!(
+                removed = r.removed,
+                "removed the shared memory of dead processes"
+            ),
+            Ok(Err(e)) => warn!("sweeping dead processes: {e}"),
+            _ => {}
+        }
     }
 
     fn publisher(
@@ -162,6 +174,7 @@ pub fn header_of(meta: &FrameMeta, payload: &Payload<'_>) -> Result<FrameHeader>
     } else {
         perturb_wire::monotonic_ns()
     };
+    header.lost_before = meta.lost_before;
     header.t_daemon_rx_ns = meta.hops.daemon_in;
     header.t_daemon_tx_ns = meta.hops.daemon_out;
     if let Some(a) = &meta.applied {
@@ -210,63 +223,152 @@ struct IoxSubscriber {
     invalid: u64,
 }
 
+/// The message a frame holds, borrowing its shared memory (`layout`: the parsed point layout of
+/// a cloud, `None` for an image).
+fn payload_of<'a>(
+    frame: &'a perturb_wire::Frame,
+    layout: Option<&Arc<PointLayout>>,
+) -> perturb_wire::WireResult<Payload<'a>> {
+    let h = frame.header();
+    let data = frame.data()?;
+    let header = Header {
+        stamp_sec: h.stamp_sec,
+        stamp_nanosec: h.stamp_nanosec,
+        frame_id: h.frame_id()?,
+    };
+    Ok(match layout {
+        None => Payload::Image(ImageMsg {
+            header,
+            height: h.height,
+            width: h.width,
+            encoding: h.encoding()?,
+            is_bigendian: h.is_bigendian,
+            step: h.step,
+            data,
+        }),
+        Some(layout) => Payload::Cloud(PointCloud2Msg {
+            header,
+            height: h.height,
+            width: h.width,
+            fields: layout.fields.clone(),
+            is_bigendian: layout.big_endian,
+            point_step: layout.point_step,
+            row_step: h.row_step,
+            data,
+            is_dense: h.is_dense != 0,
+        }),
+    })
+}
+
+/// The middleware's metadata of a frame, stamped as received now.
+fn meta_of(h: &FrameHeader) -> FrameMeta {
+    FrameMeta {
+        seq: h.seq,
+        log_time: crate::frame::wall_ns(),
+        applied: h.applied().map(|a| Applied {
+            id: a.id,
+            severity: a.severity,
+            seed: a.seed,
+        }),
+        lost_before: h.lost_before,
+        step: h.campaign_step,
+        hops: Hops {
+            source: h.t_ingress_ns,
+            daemon_in: h.t_daemon_rx_ns,
+            daemon_out: h.t_daemon_tx_ns,
+            sink: perturb_wire::monotonic_ns(),
+        },
+    }
+}
+
+/// A frame held in shared memory (see [`crate::bus::HeldFrame`]), checked when received.
+struct IoxHeld {
+    frame: perturb_wire::Frame,
+    meta: FrameMeta,
+    layout: Option<Arc<PointLayout>>,
+}
+
+impl HeldFrame for IoxHeld {
+    fn meta(&self) -> &FrameMeta {
+        &self.meta
+    }
+
+    fn payload(&self) -> Payload<'_> {
+        payload_of(&self.frame, self.layout.as_ref())
+            .expect("checked by IoxSubscriber::hold when received")
+    }
+
+    fn lost_before(&self) -> u32 {
+        self.frame.header().lost_before
+    }
+
+    fn killed(&self) -> bool {
+        self.frame.header().flags & perturb_wire::header::FLAG_KILLED != 0
+    }
+}
+
 impl IoxSubscriber {
+    /// The point layout of a frame (`None` for an image), after checking header and payload.
+    fn layout(
+        &mut self,
+        frame: &perturb_wire::Frame,
+    ) -> perturb_wire::WireResult<Option<Arc<PointLayout>>> {
+        Ok(match frame.validate()? {
+            WireModality::Camera => None,
+            WireModality::Lidar => Some(self.layouts.layout_for(frame.header())?),
+        })
+    }
+
     /// Passes one received frame to `f`, in place (an error says why the frame is invalid).
     fn deliver(
         &mut self,
         frame: &perturb_wire::Frame,
         f: &mut dyn FnMut(&FrameMeta, &Payload<'_>),
     ) -> perturb_wire::WireResult<()> {
-        let h = frame.header();
-        let modality = frame.validate()?;
-        let data = frame.data()?;
-        let header = Header {
-            stamp_sec: h.stamp_sec,
-            stamp_nanosec: h.stamp_nanosec,
-            frame_id: h.frame_id()?,
-        };
-        let payload = match modality {
-            WireModality::Camera => Payload::Image(ImageMsg {
-                header,
-                height: h.height,
-                width: h.width,
-                encoding: h.encoding()?,
-                is_bigendian: h.is_bigendian,
-                step: h.step,
-                data,
-            }),
-            WireModality::Lidar => {
-                let layout = self.layouts.layout_for(h)?;
-                Payload::Cloud(PointCloud2Msg {
-                    header,
-                    height: h.height,
-                    width: h.width,
-                    fields: layout.fields.clone(),
-                    is_bigendian: layout.big_endian,
-                    point_step: layout.point_step,
-                    row_step: h.row_step,
-                    data,
-                    is_dense: h.is_dense != 0,
-                })
-            }
-        };
-        let meta = FrameMeta {
-            seq: h.seq,
-            log_time: crate::frame::wall_ns(),
-            applied: h.applied().map(|a| Applied {
-                id: a.id,
-                severity: a.severity,
-                seed: a.seed,
-            }),
-            hops: Hops {
-                source: h.t_ingress_ns,
-                daemon_in: h.t_daemon_rx_ns,
-                daemon_out: h.t_daemon_tx_ns,
-                sink: perturb_wire::monotonic_ns(),
-            },
-        };
-        f(&meta, &payload);
+        let layout = self.layout(frame)?;
+        let payload = payload_of(frame, layout.as_ref())?;
+        f(&meta_of(frame.header()), &payload);
         Ok(())
+    }
+
+    /// Checks a received frame and keeps it (an error says why the frame is invalid).
+    fn hold(&mut self, frame: perturb_wire::Frame) -> perturb_wire::WireResult<Held> {
+        let layout = self.layout(&frame)?;
+        payload_of(&frame, layout.as_ref())?;
+        let meta = meta_of(frame.header());
+        Ok(Box::new(IoxHeld {
+            frame,
+            meta,
+            layout,
+        }))
+    }
+
+    /// Waits up to `timeout` for the first frame; a broken connection is reopened (no frame).
+    fn first(&mut self, timeout: Duration) -> Result<Option<perturb_wire::Frame>> {
+        match self.subscriber.wait(timeout) {
+            Ok(x) => Ok(x),
+            Err(e) if e.is_borrow_limit() => Ok(None),
+            Err(e) => {
+                // A broken connection is reconnected, not counted as a bad message.
+                self.subscriber.reopen()?;
+                info!(
+                    service = self.subscriber.service(),
+                    reconnects = self.subscriber.reconnects(),
+                    "reconnected after: {e}"
+                );
+                Ok(None)
+            }
+        }
+    }
+
+    fn invalid(&mut self, seq: u64, e: &dyn std::fmt::Display) {
+        self.invalid += 1;
+        warn!(
+            service = self.subscriber.service(),
+            seq,
+            invalid = self.invalid,
+            "skipping an invalid frame: {e}"
+        );
     }
 }
 
@@ -281,36 +383,36 @@ impl BusSubscriber for IoxSubscriber {
         f: &mut dyn FnMut(&FrameMeta, &Payload<'_>),
     ) -> Result<usize> {
         let mut n = 0;
-        let mut next = match self.subscriber.wait(timeout) {
-            Ok(x) => x,
-            Err(e) if e.is_borrow_limit() => None,
-            Err(e) => {
-                // A broken connection is reconnected, not counted as a bad message.
-                self.subscriber.reopen()?;
-                info!(
-                    service = self.subscriber.service(),
-                    reconnects = self.subscriber.reconnects(),
-                    "reconnected after: {e}"
-                );
-                return Ok(0);
-            }
-        };
+        let mut next = self.first(timeout)?;
         while let Some(frame) = next {
             match self.deliver(&frame, f) {
                 Ok(()) => n += 1,
-                Err(e) => {
-                    self.invalid += 1;
-                    warn!(
-                        service = self.subscriber.service(),
-                        seq = frame.header().seq,
-                        invalid = self.invalid,
-                        "skipping an invalid frame: {e}"
-                    );
-                }
+                Err(e) => self.invalid(frame.header().seq, &e),
             }
             drop(frame);
-            next = self.subscriber.receive()?;
+            next = match self.subscriber.receive() {
+                Err(e) if e.is_borrow_limit() => None,
+                other => other?,
+            };
         }
         Ok(n)
+    }
+
+    fn recv_held(&mut self, timeout: Duration) -> Result<Vec<Held>> {
+        let mut out = Vec::new();
+        let mut next = self.first(timeout)?;
+        while let Some(frame) = next {
+            let seq = frame.header().seq;
+            match self.hold(frame) {
+                Ok(h) => out.push(h),
+                Err(e) => self.invalid(seq, &e),
+            }
+            // At the borrow limit the frames held elsewhere must be handed back first.
+            next = match self.subscriber.receive() {
+                Err(e) if e.is_borrow_limit() => None,
+                other => other?,
+            };
+        }
+        Ok(out)
     }
 }

@@ -10,13 +10,20 @@
 
 pub mod adapter;
 pub mod bus;
+pub mod camera_info;
 pub mod config;
+pub mod daemon_link;
 pub mod dds;
 pub mod egress;
 pub mod endpoint;
+pub mod events;
 pub mod frame;
+pub mod guard;
 pub mod ingress;
 pub mod iox;
+pub mod kill;
+pub mod msgs;
+pub mod pose;
 pub mod record;
 pub mod replay;
 pub mod ros1;

@@ -234,6 +234,10 @@ fn replay_config(a: &ReplayArgs, cfg: &mut Config) -> Result<()> {
                     perturb_bridge::config::Transport::Dds
                 },
                 qos: Qos::default(),
+                deadline_ms: None,
+                rate_hz: None,
+                on_late: Default::default(),
+                camera_info: None,
             });
         }
     }

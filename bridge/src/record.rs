@@ -126,9 +126,16 @@ impl Adapter for Record {
             drop(tx);
             drop(ready_tx);
             for _ in 0..sides.len() {
-                ready_rx.recv().map_err(|_| {
-                    anyhow::anyhow!("a recorder thread ended before it was ready")
-                })??;
+                let started = ready_rx
+                    .recv()
+                    .map_err(|_| anyhow::anyhow!("a recorder thread ended before it was ready"))
+                    .and_then(|r| r);
+                if let Err(e) = started {
+                    // The sides that did start must stop too, or this scope never ends.
+                    let e = explain_full(e);
+                    shared.ctl.stop_because(format!("{name}: {e:#}"));
+                    return Err(e);
+                }
             }
             ctl.ready();
             // Write until every stream thread has finished and the queue is empty.
@@ -152,9 +159,21 @@ impl Adapter for Record {
             }
         }
         rep.latency = Some(all.summary());
+        rep.lost_by_cause.recorder = rep.failed;
         let dir = writer.finish()?;
         rep.notes.push(format!("bag written to {}", dir.display()));
         Ok(rep)
+    }
+}
+
+/// A subscriber refused because the stream side has as many readers as it allows: says so.
+fn explain_full(e: anyhow::Error) -> anyhow::Error {
+    if format!("{e:#}").contains("ExceedsMax") {
+        e.context(
+            "the stream already has as many readers as its QoS allows (`max_subscribers`): another recorder, egress or monitor reads it; stop one, or give every process of the stream a larger [bridge] qos / [[streams]] qos max_subscribers",
+        )
+    } else {
+        e
     }
 }
 

@@ -7,12 +7,19 @@
 
 use crate::adapter::{Adapter, Control};
 use crate::bus::{Bus, Side};
+use crate::camera_info::{CameraInfoLink, CameraInfoSink};
 use crate::config::{BusKind, Config, Transport};
+use crate::dds::rustdds_backend::RustddsBackend;
 use crate::dds::{self, DdsBackend, TopicSpec};
 use crate::egress::Egress;
 use crate::endpoint::Endpoint;
+use crate::events::{Events, EventsHub};
 use crate::frame::{StreamKind, monotonic_ns};
+use crate::guard::{GuardSettings, LocalKill};
 use crate::ingress::Ingress;
+use crate::kill::KillWatch;
+use crate::msgs::SmallEndpoint;
+use crate::pose::PoseFeed;
 use crate::record::Record;
 use crate::replay::{Replay, ReplayAdapter};
 use crate::stats::AdapterReport;
@@ -114,11 +121,63 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
         let clock = if cfg.ros1.clock { ros1.clone() } else { None };
         sources.push(Box::new(ReplayAdapter { replay, clock }));
     }
+    let mut small = SmallEndpoints::new(cfg, ros1.clone());
+    let kill = Arc::new(LocalKill::default());
+    let events = match &cfg.events {
+        Some(e) => {
+            let (hub, rx) = EventsHub::new();
+            let transport = cfg.events_transport().unwrap_or_default();
+            sinks.push(Box::new(Events {
+                topic: e.topic.clone(),
+                mode: e.mode,
+                endpoint: small.of(transport)?,
+                rx,
+                hub: hub.clone(),
+            }));
+            Some(hub)
+        }
+        None => None,
+    };
+    if let (Some(k), Some(transport)) = (&cfg.kill, cfg.kill_transport()) {
+        sinks.push(Box::new(KillWatch {
+            topic: k.topic.clone(),
+            ros2_type: k.ros2_type.clone(),
+            field: k.field.clone(),
+            definition: k.definition.clone(),
+            rule: k.rule(),
+            deadman: k.deadman_s.map(Duration::from_secs_f64),
+            endpoint: small.of(transport)?,
+            latch: kill.clone(),
+            events: events.clone(),
+            iox2: cfg.bridge.iox2.clone(),
+            control_service: k.control_service.clone(),
+        }));
+    }
+    if let (Some(p), Some(transport)) = (&cfg.pose, cfg.pose_transport()) {
+        sinks.push(Box::new(PoseFeed {
+            topic: p.topic.clone(),
+            ros2_type: p.ros2_type.clone(),
+            field: p.field.clone(),
+            definition: p.definition.clone(),
+            max_rate_hz: p.max_rate_hz,
+            endpoint: small.of(transport)?,
+            iox2: cfg.bridge.iox2.clone(),
+            control_service: p.control_service.clone(),
+        }));
+    }
+    let mut calibrations: BTreeMap<String, Arc<CameraInfoLink>> = BTreeMap::new();
     if !cfg.ingress.is_empty() {
         let transports: Vec<Transport> = cfg.ingress.iter().map(|i| i.transport).collect();
         let ends = Endpoints::open(cfg, &transports, "ingress", &ros1)?;
         endless = true;
         for i in &cfg.ingress {
+            let camera_info = match &i.camera_info {
+                Some(topic) => {
+                    let link = calibrations.entry(i.stream.clone()).or_default().clone();
+                    Some((topic.clone(), small.of(i.transport)?, link))
+                }
+                None => None,
+            };
             sources.push(Box::new(Ingress {
                 spec: TopicSpec {
                     topic: i.topic.clone(),
@@ -127,6 +186,7 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
                 },
                 stream: i.stream.clone(),
                 endpoint: ends.of(i.transport)?,
+                camera_info,
             }));
         }
     }
@@ -142,7 +202,18 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
         let transports: Vec<Transport> = cfg.egress.iter().map(|e| e.transport).collect();
         let ends = Endpoints::open(cfg, &transports, "egress", &ros1)?;
         for (i, e) in cfg.egress.iter().enumerate() {
-            sinks.push(egress_sink(i, e, &kinds, &ends)?);
+            let camera_info = match (&e.camera_info, calibrations.get(&e.stream)) {
+                (Some(topic), Some(link)) => Some((
+                    link.clone(),
+                    CameraInfoSink::new(topic.clone(), small.of(e.transport)?),
+                )),
+                _ => None,
+            };
+            let mut sink = egress_sink(i, e, &kinds, &ends)?;
+            sink.kill = kill.clone();
+            sink.events = events.clone();
+            sink.camera_info = camera_info;
+            sinks.push(sink);
         }
     }
     if let Some(r) = &cfg.record {
@@ -208,13 +279,55 @@ impl Endpoints {
     }
 }
 
-/// The sink of `[[egress]]` entry `i`: the perturbed side of its stream, on its topic.
+/// Where the small topics (events, camera_info, kill switch, pose) are opened: the ROS 1 node,
+/// and for ROS 2 one RustDDS participant of their own (opened when first needed).
+struct SmallEndpoints {
+    ros1: Option<Arc<crate::ros1::Node>>,
+    dds: Option<Arc<RustddsBackend>>,
+    participant: crate::dds::ParticipantConfig,
+    name: String,
+}
+
+impl SmallEndpoints {
+    fn new(cfg: &Config, ros1: Option<Arc<crate::ros1::Node>>) -> Self {
+        SmallEndpoints {
+            ros1,
+            dds: None,
+            participant: cfg.dds.participant(),
+            name: format!("{}_small", cfg.bridge.name),
+        }
+    }
+
+    /// The endpoint of a small topic on `transport`.
+    fn of(&mut self, transport: Transport) -> Result<SmallEndpoint> {
+        match transport {
+            Transport::Ros1 => Ok(SmallEndpoint::Ros1(
+                self.ros1
+                    .clone()
+                    .context("the ROS 1 node was not started")?,
+            )),
+            Transport::Dds => {
+                if self.dds.is_none() {
+                    let nets = crate::dds::interfaces::resolve(&self.participant.interfaces)?;
+                    self.dds = Some(Arc::new(
+                        RustddsBackend::new(self.participant.domain_id, &self.name, nets.as_deref())
+                            .context("dds (the participant of the small topics: events, camera_info, kill switch, pose)")?,
+                    ));
+                }
+                Ok(SmallEndpoint::Dds(self.dds.clone().expect("opened above")))
+            }
+        }
+    }
+}
+
+/// The sink of `[[egress]]` entry `i`: the perturbed side of its stream, on its topic, guarded
+/// (see [`crate::guard`]).
 fn egress_sink(
     i: usize,
     e: &crate::config::EgressEntry,
     kinds: &BTreeMap<String, StreamKind>,
     ends: &Endpoints,
-) -> Result<Box<dyn Adapter>> {
+) -> Result<Box<Egress>> {
     let kind = *kinds.get(&e.stream).with_context(|| {
         format!(
             "egress[{i}].kind: nothing says what stream `{}` carries: add `kind = \"image\"` or `\"cloud\"`",
@@ -235,6 +348,14 @@ fn egress_sink(
         },
         side: Side::Perturbed,
         endpoint: ends.of(e.transport)?,
+        guard: Some(GuardSettings {
+            deadline: e.deadline_ms.map(|ms| Duration::from_secs_f64(ms / 1000.0)),
+            rate_hz: e.rate_hz,
+            on_late: e.on_late,
+        }),
+        kill: Arc::default(),
+        events: None,
+        camera_info: None,
     }))
 }
 

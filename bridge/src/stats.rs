@@ -144,6 +144,17 @@ pub struct AdapterReport {
     /// does) or the ROS 1 ingress's own queue when the bus side fell behind.
     #[serde(default)]
     pub dropped: u64,
+    /// Frames lost, by cause (the causes `perturb ctl stats` and the events use): for an egress
+    /// what the ADS did not receive, for the recorder what the bag lacks.
+    #[serde(default)]
+    pub lost_by_cause: perturb_wire::control::LostByCause,
+    /// Egress: raw frames published in place of perturbed ones, by reason (the ADS received
+    /// them: they are not lost).
+    #[serde(default)]
+    pub fallback_raw: crate::guard::FallbackCounts,
+    /// Egress: perturbed frames that came after their raw frame had gone out (discarded).
+    #[serde(default)]
+    pub late_discarded: u64,
     /// Damage found (bags).
     pub damage: Vec<String>,
     /// Notes.

@@ -118,6 +118,8 @@ impl Adapter for Synthetic {
                 seq,
                 log_time: wall,
                 applied: None,
+                lost_before: 0,
+                step: 0,
                 hops: Hops {
                     source: monotonic_ns(),
                     ..Default::default()

@@ -6,9 +6,19 @@ use crate::dds::Received;
 use crate::frame::Payload;
 use std::time::Duration;
 
-/// What a [`TopicReader`] calls for each message: the ROS 1 header `seq` (if any) and the
-/// message, or why it does not decode.
-pub type OnMessage<'f> = dyn FnMut(Option<u32>, Result<Received<'_>, perturb_core::Error>) + 'f;
+/// A ROS 1 message's place in its publisher's stream.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Ros1Seq {
+    /// The header's `seq`.
+    pub seq: u32,
+    /// Messages of the same publisher missing just before this one (a gap in `seq`): lost
+    /// before the bridge, or dropped by the bridge's own queue (see [`TopicReader::dropped`]).
+    pub lost_before: u32,
+}
+
+/// What a [`TopicReader`] calls for each message: where a ROS 1 message stands in its
+/// publisher's `seq` (if it is one) and the message, or why it does not decode.
+pub type OnMessage<'f> = dyn FnMut(Option<Ros1Seq>, Result<Received<'_>, perturb_core::Error>) + 'f;
 
 /// Reads sensor messages from one topic.
 pub trait TopicReader: Send {

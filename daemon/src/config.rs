@@ -35,6 +35,9 @@ pub struct DaemonConfig {
     pub stats_interval_s: f64,
     /// Where the JSON report is written on exit (relative paths: to the working directory).
     pub report: Option<PathBuf>,
+    /// A campaign to run from the start (relative paths: to this file's folder); see
+    /// `config/campaign.toml`.
+    pub campaign: Option<PathBuf>,
 }
 
 impl Default for DaemonConfig {
@@ -43,6 +46,7 @@ impl Default for DaemonConfig {
             control_service: names::CONTROL.to_string(),
             stats_interval_s: 5.0,
             report: None,
+            campaign: None,
         }
     }
 }
@@ -72,7 +76,24 @@ impl Config {
             message,
         };
         let text = std::fs::read_to_string(path).map_err(|e| err(format!("cannot read: {e}")))?;
-        let cfg = Config::parse(&text).map_err(err)?;
+        let mut cfg = Config::parse(&text).map_err(err)?;
+        if let Some(c) = &mut cfg.daemon.campaign {
+            if c.is_relative()
+                && let Some(dir) = path.parent()
+            {
+                *c = dir.join(&*c);
+            }
+            let campaign = perturb_campaign::Campaign::load(c)
+                .map_err(|e| err(format!("daemon.campaign: {e}")))?;
+            let streams: Vec<(String, perturb_core::registry::Modality)> = cfg
+                .streams
+                .iter()
+                .map(|s| (s.name.clone(), s.modality))
+                .collect();
+            campaign
+                .check_streams(&streams)
+                .map_err(|e| err(format!("daemon.campaign: {e}")))?;
+        }
         Ok(cfg)
     }
 
@@ -129,6 +150,24 @@ impl Config {
     }
 }
 
+/// Checks that the report (and the state files kept beside it) can be written: its folder
+/// exists. The error names the key and the folder.
+pub fn check_report_path(report: &std::path::Path) -> Result<(), String> {
+    let dir = report
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    if dir.is_dir() {
+        Ok(())
+    } else {
+        Err(format!(
+            "daemon.report (or --report) {}: the folder {} does not exist; the report and the restart state (kill switch, perturbations set at runtime, counters) are kept there",
+            report.display(),
+            dir.display()
+        ))
+    }
+}
+
 /// The names and services of the streams checked so far: each belongs to one stream.
 #[derive(Default)]
 struct Seen {
@@ -141,15 +180,8 @@ impl Seen {
     /// Checks stream `i`'s name and services, and that no earlier stream has them.
     fn claim(&mut self, i: usize, s: &StreamConfig) -> Result<(), String> {
         let key = |k: &str| format!("streams[{i}] ({}).{k}", s.name);
-        if s.name.is_empty()
-            || s.name.len() > 200
-            || s.name.chars().any(|c| c.is_whitespace() || c.is_control())
-        {
-            return Err(format!(
-                "streams[{i}].name: `{}` must be 1..=200 bytes without spaces",
-                s.name
-            ));
-        }
+        perturb_wire::names::check_stream(&s.name)
+            .map_err(|e| format!("streams[{i}].name: {e}"))?;
         if !self.names.insert(s.name.clone()) {
             return Err(format!(
                 "streams[{i}].name: `{}` is used by two streams",
@@ -237,6 +269,10 @@ mod tests {
             e.contains("streams[1] (lidar).sensor") && e.contains("vlp99"),
             "{e}"
         );
+        for bad in ["../etc", "/cam", "cam//x", "a b"] {
+            let e = err(&GOOD.replace("name = \"lidar\"", &format!("name = \"{bad}\"")));
+            assert!(e.contains("streams[1].name"), "{bad}: {e}");
+        }
         let e = err(&GOOD.replace("name = \"lidar\"", "name = \"cam\""));
         assert!(
             e.contains("streams[1].name") && e.contains("two streams"),

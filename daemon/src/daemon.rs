@@ -2,8 +2,10 @@
 //! workers, serve the control channel and log statistics until SIGINT/SIGTERM, then stop the
 //! workers, write the JSON report and exit.
 
+use crate::campaign::CampaignRunner;
 use crate::config::{Config, StreamConfig};
 use crate::perturbation::{self, Active};
+use crate::safety::KillSwitch;
 use crate::state::{self, CountersFile, RuntimeState, StatePaths};
 use crate::worker::{self, StreamRuntime};
 use perturb_core::registry::Modality;
@@ -58,6 +60,16 @@ pub fn run(
     let paths = StatePaths::for_report(&report_path);
     let saved = load_saved(&paths, fresh);
     let counters = open_counters(&paths, &cfg, fresh);
+    let kill = Arc::new(KillSwitch::restored(
+        saved.as_ref().and_then(|s| s.killed.clone()),
+    ));
+    if let Some(k) = kill.record() {
+        warn!(
+            reason = k.reason.as_str(),
+            state = %paths.runtime.display(),
+            "the kill switch was engaged before the restart and still is: every stream passes raw frames until `perturb ctl arm`"
+        );
+    }
 
     // Open every stream's services before starting any worker, so a bad stream stops the
     // daemon before it touches the others.
@@ -66,7 +78,8 @@ pub fn run(
     let mut ports = Vec::new();
     for s in &cfg.streams {
         let initial = initial_perturbation(s, saved.as_ref(), &paths)?;
-        let (rt, input, output) = open_stream(&transport, s, &initial, counters.as_ref())?;
+        let (rt, input, output) =
+            open_stream(&transport, s, &initial, counters.as_ref(), kill.clone())?;
         ports.push((rt.clone(), input, output, initial));
         streams.push(rt);
     }
@@ -76,11 +89,33 @@ pub fn run(
     }
     let persist = Persist {
         path: paths.runtime.clone(),
+        kill: kill.clone(),
     };
-    persist.save(&streams);
+    let resume = saved.as_ref().and_then(|s| s.campaign.clone());
+    let campaign_file = cfg
+        .daemon
+        .campaign
+        .clone()
+        .or_else(|| resume.as_ref().map(|r| r.file.clone()));
+    let campaign = match campaign_file {
+        Some(f) => Some(
+            CampaignRunner::start(f, &streams, resume.as_ref())
+                .map_err(|e| anyhow::anyhow!("campaign: {e}"))?,
+        ),
+        None => None,
+    };
+    let mut ctx = Controlled {
+        streams: &streams,
+        kill: &kill,
+        campaign,
+    };
+    if let Some(c) = &mut ctx.campaign {
+        c.evaluate(&streams);
+    }
+    persist.save(&streams, ctx.campaign.as_ref());
     info!(control = control_service, "perturbd ready");
 
-    let stopped_by = serve(&server, &streams, cfg.daemon.stats_interval_s, &persist);
+    let stopped_by = serve(&server, &mut ctx, cfg.daemon.stats_interval_s, &persist);
     info!(reason = stopped_by.as_str(), "perturbd stopping");
     shutdown.store(true, Ordering::Relaxed);
     for t in threads {
@@ -242,6 +277,7 @@ fn open_stream(
     s: &StreamConfig,
     initial: &Option<Active>,
     counters: Option<&CountersFile>,
+    kill: Arc<KillSwitch>,
 ) -> anyhow::Result<(Arc<StreamRuntime>, FrameSubscriber, FramePublisher)> {
     let output = transport
         .publisher(&s.output_service(), &s.qos, Hop::Keep, 1)
@@ -252,7 +288,8 @@ fn open_stream(
     let cell = counters.and_then(|f| f.cell(&s.name)).unwrap_or_default();
     let rt = Arc::new(
         StreamRuntime::new(s.clone(), initial.as_ref().map(|a| a.spec()), cell)
-            .map_err(|e| anyhow::anyhow!("stream `{}` worker threads: {e}", s.name))?,
+            .map_err(|e| anyhow::anyhow!("stream `{}` worker threads: {e}", s.name))?
+            .with_kill(kill),
     );
     info!(
         stream = s.name.as_str(),
@@ -294,13 +331,28 @@ fn report_value(r: &Report) -> serde_json::Value {
 pub struct Persist {
     /// The runtime state file.
     pub path: PathBuf,
+    /// The kill switch (kept engaged across restarts).
+    pub kill: Arc<KillSwitch>,
+}
+
+/// What the control handler works on: the streams, the kill switch, the campaign.
+pub struct Controlled<'a> {
+    /// Every stream.
+    pub streams: &'a [Arc<StreamRuntime>],
+    /// The kill switch.
+    pub kill: &'a KillSwitch,
+    /// The running campaign.
+    pub campaign: Option<CampaignRunner>,
 }
 
 impl Persist {
-    /// Saves what every stream runs now (a failure is logged: the daemon goes on).
-    pub fn save(&self, streams: &[Arc<StreamRuntime>]) {
+    /// Saves what every stream runs now, the kill switch and the campaign (a failure is
+    /// logged: the daemon goes on).
+    pub fn save(&self, streams: &[Arc<StreamRuntime>], campaign: Option<&CampaignRunner>) {
         let mut st = RuntimeState {
             version: 1,
+            killed: self.kill.record(),
+            campaign: campaign.map(|c| c.state().clone()),
             ..Default::default()
         };
         for rt in streams {
@@ -328,7 +380,7 @@ impl Persist {
 /// The control and statistics loop; returns why it stopped.
 fn serve(
     server: &ControlServer,
-    streams: &[Arc<StreamRuntime>],
+    ctx: &mut Controlled<'_>,
     stats_interval_s: f64,
     persist: &Persist,
 ) -> String {
@@ -340,8 +392,8 @@ fn serve(
         Ok(g) => g,
         Err(e) => return format!("cannot attach the control listener: {e:?}"),
     };
-    // Also wakes regularly to notice a termination signal delivered to another thread and to
-    // log statistics.
+    // Also wakes regularly to notice a termination signal delivered to another thread, to log
+    // statistics and to move a campaign's time steps on.
     let _tick = match waitset.attach_interval(Duration::from_millis(250)) {
         Ok(g) => g,
         Err(e) => return format!("cannot attach the tick: {e:?}"),
@@ -351,11 +403,15 @@ fn serve(
         let r = waitset.wait_and_process_once(|id| {
             if id.has_event_from(&control)
                 && let Err(e) = server.serve(|req| {
-                    let change =
-                        matches!(req, ControlRequest::Set { .. } | ControlRequest::Off { .. });
-                    let resp = handle(streams, req);
+                    let change = !matches!(
+                        req,
+                        ControlRequest::Status
+                            | ControlRequest::Stats
+                            | ControlRequest::Pose { .. }
+                    );
+                    let resp = handle(ctx, req);
                     if change && resp.ok {
-                        persist.save(streams);
+                        persist.save(ctx.streams, ctx.campaign.as_ref());
                     }
                     resp
                 })
@@ -369,9 +425,12 @@ fn serve(
             Ok(_) => {}
             Err(e) => return format!("WaitSet failed: {e:?}"),
         }
+        if let Some(c) = &mut ctx.campaign {
+            c.evaluate(ctx.streams);
+        }
         if stats_interval_s > 0.0 && last_log.elapsed().as_secs_f64() >= stats_interval_s {
             last_log = Instant::now();
-            log_stats(streams);
+            log_stats(ctx.streams);
         }
     }
 }
@@ -404,17 +463,19 @@ fn log_stats(streams: &[Arc<StreamRuntime>]) {
 }
 
 /// Answers one control request.
-pub fn handle(streams: &[Arc<StreamRuntime>], req: ControlRequest) -> ControlResponse {
+pub fn handle(ctx: &mut Controlled<'_>, req: ControlRequest) -> ControlResponse {
+    let (streams, kill) = (ctx.streams, ctx.kill);
+    let campaign_status = |c: &Option<CampaignRunner>| c.as_ref().map(CampaignRunner::status);
     let find = |name: &str| {
         streams
             .iter()
             .find(|s| s.config.name == name)
             .ok_or_else(|| {
                 let known: Vec<&str> = streams.iter().map(|s| s.config.name.as_str()).collect();
-                ControlResponse::error(format!(
+                Box::new(ControlResponse::error(format!(
                     "unknown stream `{name}` (streams: {})",
                     known.join(", ")
-                ))
+                )))
             })
     };
     match req {
@@ -426,8 +487,13 @@ pub fn handle(streams: &[Arc<StreamRuntime>], req: ControlRequest) -> ControlRes
         } => {
             let rt = match find(&stream) {
                 Ok(r) => r,
-                Err(e) => return e,
+                Err(e) => return *e,
             };
+            if rt.in_campaign() {
+                return ControlResponse::error(format!(
+                    "stream `{stream}` is driven by the running campaign: `perturb ctl campaign --stop` first"
+                ));
+            }
             let seed = seed.unwrap_or_else(|| rt.current_seed());
             match perturbation::build(&rt.config, &id, severity, seed, rt.last_geometry()) {
                 Ok((spec, active)) => {
@@ -439,8 +505,13 @@ pub fn handle(streams: &[Arc<StreamRuntime>], req: ControlRequest) -> ControlRes
                         seed,
                         "control: set"
                     );
+                    let when = if kill.engaged() {
+                        "held while the kill switch is engaged (active after `perturb ctl arm`)"
+                    } else {
+                        "active from the next frame"
+                    };
                     ControlResponse::ack(format!(
-                        "{stream}: {} ({}) severity {severity} seed {seed}, active from the next frame",
+                        "{stream}: {} ({}) severity {severity} seed {seed}, {when}",
                         spec.entry.id, spec.entry.name
                     ))
                 }
@@ -450,8 +521,13 @@ pub fn handle(streams: &[Arc<StreamRuntime>], req: ControlRequest) -> ControlRes
         ControlRequest::Off { stream } => {
             let rt = match find(&stream) {
                 Ok(r) => r,
-                Err(e) => return e,
+                Err(e) => return *e,
             };
+            if rt.in_campaign() {
+                return ControlResponse::error(format!(
+                    "stream `{stream}` is driven by the running campaign: `perturb ctl campaign --stop` first (or the kill switch, `perturb ctl off --all`)"
+                ));
+            }
             rt.off();
             info!(stream = stream.as_str(), "control: off");
             ControlResponse::ack(format!(
@@ -461,12 +537,135 @@ pub fn handle(streams: &[Arc<StreamRuntime>], req: ControlRequest) -> ControlRes
         ControlRequest::Status => ControlResponse {
             ok: true,
             streams: Some(streams.iter().map(|s| s.report(false)).collect()),
+            killed: kill.record(),
+            campaign: campaign_status(&ctx.campaign),
             ..Default::default()
         },
         ControlRequest::Stats => ControlResponse {
             ok: true,
             streams: Some(streams.iter().map(|s| s.report(true)).collect()),
+            killed: kill.record(),
+            campaign: campaign_status(&ctx.campaign),
             ..Default::default()
         },
+        ControlRequest::Kill { reason } => {
+            let reason = reason.unwrap_or_else(|| "perturb ctl off --all".into());
+            let first = kill.engage(&reason);
+            let k = kill.record();
+            if first {
+                warn!(
+                    reason = reason.as_str(),
+                    "kill switch engaged: every stream passes raw frames from the next frame on, until `perturb ctl arm`"
+                );
+            }
+            ControlResponse {
+                ok: true,
+                message: Some(if first {
+                    format!(
+                        "kill switch engaged ({reason}): every stream passes raw frames from the next frame on, until `perturb ctl arm`"
+                    )
+                } else {
+                    format!(
+                        "kill switch already engaged ({}): every stream passes raw frames until `perturb ctl arm`",
+                        k.as_ref().map_or("?", |k| k.reason.as_str())
+                    )
+                }),
+                killed: k,
+                ..Default::default()
+            }
+        }
+        ControlRequest::Arm => match kill.arm() {
+            Some(k) => {
+                warn!(
+                    was = k.reason.as_str(),
+                    "kill switch armed again: every stream runs what it is set to from the next frame"
+                );
+                let what: Vec<String> = streams
+                    .iter()
+                    .map(|s| {
+                        let r = s.report(false);
+                        format!(
+                            "{} {}",
+                            r.name,
+                            r.id.map_or("off".to_string(), |id| format!(
+                                "{id} severity {}",
+                                r.severity.unwrap_or(0)
+                            ))
+                        )
+                    })
+                    .collect();
+                ControlResponse::ack(format!(
+                    "armed (the kill switch had been engaged by: {}); from the next frame: {}",
+                    k.reason,
+                    what.join(", ")
+                ))
+            }
+            None => ControlResponse::ack("the kill switch was not engaged: nothing to arm"),
+        },
+        ControlRequest::Pose { x, y } => {
+            if !(x.is_finite() && y.is_finite()) {
+                return ControlResponse::error(format!("pose ({x}, {y}) is not finite"));
+            }
+            match &mut ctx.campaign {
+                Some(c) => {
+                    c.pose(x, y);
+                    c.evaluate(streams);
+                    ControlResponse::ack("pose taken")
+                }
+                None => ControlResponse::ack("no campaign runs: pose ignored"),
+            }
+        }
+        ControlRequest::Next => match &mut ctx.campaign {
+            Some(c) => match c.advance() {
+                Ok(msg) => {
+                    c.evaluate(streams);
+                    info!("control: next ({msg})");
+                    ControlResponse {
+                        ok: true,
+                        message: Some(msg),
+                        campaign: campaign_status(&ctx.campaign),
+                        ..Default::default()
+                    }
+                }
+                Err(e) => ControlResponse::error(e),
+            },
+            None => ControlResponse::error(
+                "no campaign runs (start one with `perturb ctl campaign FILE`)",
+            ),
+        },
+        ControlRequest::Campaign { file, stop } => {
+            if stop {
+                return match ctx.campaign.take() {
+                    Some(c) => {
+                        c.stop(streams);
+                        ControlResponse::ack(
+                            "campaign stopped: its streams pass raw frames and take `perturb ctl set` again",
+                        )
+                    }
+                    None => ControlResponse::error("no campaign runs"),
+                };
+            }
+            if let Some(f) = file {
+                if let Some(c) = ctx.campaign.take() {
+                    c.stop(streams);
+                }
+                match CampaignRunner::start(PathBuf::from(&f), streams, None) {
+                    Ok(mut c) => {
+                        c.evaluate(streams);
+                        ctx.campaign = Some(c);
+                    }
+                    Err(e) => return ControlResponse::error(format!("campaign {f}: {e}")),
+                }
+            }
+            ControlResponse {
+                ok: true,
+                message: Some(match &ctx.campaign {
+                    Some(c) => format!("campaign `{}` runs", c.status().name),
+                    None => "no campaign runs".into(),
+                }),
+                campaign: campaign_status(&ctx.campaign),
+                ..Default::default()
+            }
+        }
     }
 }

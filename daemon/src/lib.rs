@@ -11,9 +11,11 @@
 //! The library exposes the configuration (used by the end-to-end tests and tools to find the
 //! services and QoS of a stream) and the pieces of the daemon.
 
+pub mod campaign;
 pub mod config;
 pub mod daemon;
 pub mod perturbation;
+pub mod safety;
 pub mod state;
 pub mod stats;
 pub mod stream;

@@ -45,6 +45,14 @@ fn main() {
             std::process::exit(2);
         }
     };
+    // The report, and the restart state beside it, must be writable: found at --check, not
+    // when the daemon stops (the state would live in memory only meanwhile).
+    if let Some(r) = args.report.as_ref().or(cfg.daemon.report.as_ref())
+        && let Err(e) = perturbd::config::check_report_path(r)
+    {
+        eprintln!("error: {}: {e}", args.config.display());
+        std::process::exit(2);
+    }
     if args.check {
         println!(
             "{}: {} stream(s), configuration valid",

@@ -69,12 +69,18 @@ pub struct StreamState {
 }
 
 /// The runtime state file.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct RuntimeState {
     /// Format version (1).
     pub version: u32,
     /// Per stream name.
     pub streams: BTreeMap<String, StreamState>,
+    /// The kill switch, when it was engaged: a restarted daemon keeps it engaged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub killed: Option<crate::safety::KillRecord>,
+    /// The running campaign: a restarted daemon carries on with it, on the same clock.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub campaign: Option<crate::campaign::CampaignState>,
 }
 
 /// What the configuration says a stream runs at start.
@@ -149,7 +155,19 @@ pub struct Counters {
     pub origin_lo: AtomicU64,
     /// 1 when `origin_hi`/`origin_lo` hold a publisher.
     pub origin_set: AtomicU64,
+    /// Frames the input's publisher sent that this daemon never received while it ran: its
+    /// input queue overflowed because it was stalled (SIGSTOP, a frozen machine) or overloaded
+    /// (gaps in [`perturb_wire::FrameHeader::publish_index`]).
+    pub dropped_input: AtomicU64,
+    /// Frames the input's publisher sent while no daemon ran (killed, crashed, restarting),
+    /// counted by the next daemon from the gap in `publish_index`.
+    pub dropped_down: AtomicU64,
+    /// The last `publish_index` received + 1 (0: none yet), of the publisher in `origin_*`.
+    pub last_index_plus_one: AtomicU64,
 }
+
+/// How many counters a stream has (the `u64`s of [`Counters`], in order).
+const N_COUNTERS: usize = 16;
 
 impl Counters {
     /// Adds `n` to a counter.
@@ -162,7 +180,7 @@ impl Counters {
         c.load(Ordering::Relaxed)
     }
 
-    fn all(&self) -> [&AtomicU64; 13] {
+    fn all(&self) -> [&AtomicU64; N_COUNTERS] {
         [
             &self.frames_in,
             &self.frames_out,
@@ -177,10 +195,13 @@ impl Counters {
             &self.origin_hi,
             &self.origin_lo,
             &self.origin_set,
+            &self.dropped_input,
+            &self.dropped_down,
+            &self.last_index_plus_one,
         ]
     }
 
-    fn set_values(&self, v: &[u64; 13]) {
+    fn set_values(&self, v: &[u64; N_COUNTERS]) {
         for (c, v) in self.all().iter().zip(v) {
             c.store(*v, Ordering::Relaxed);
         }
@@ -220,6 +241,13 @@ impl Counters {
                 + g(&self.dropped_restart),
         )
     }
+
+    /// The publisher last heard from and the last `publish_index` received from it.
+    pub fn last_index(&self) -> Option<(u128, u64)> {
+        let (origin, _) = self.last_origin()?;
+        let index = Self::get(&self.last_index_plus_one).checked_sub(1)?;
+        Some((origin, index))
+    }
 }
 
 /// Where a stream's counters live.
@@ -257,7 +285,7 @@ impl std::ops::Deref for CounterCell {
             CounterCell::Mapped { map, offset } => {
                 // SAFETY: `CountersFile::open` sized the mapping to hold every slot and placed
                 // each slot at a multiple of SLOT (a multiple of 8) from the page-aligned start,
-                // so the pointer is in bounds and aligned for `Counters` (13 `AtomicU64`s,
+                // so the pointer is in bounds and aligned for `Counters` (16 `AtomicU64`s,
                 // `repr(C)`). The mapping is `MAP_SHARED` read-write and lives as long as `map`;
                 // it is only ever accessed through these atomics (shared references are fine
                 // for them), and the file is this daemon's own.
@@ -300,7 +328,7 @@ impl std::fmt::Debug for CountersFile {
 }
 
 /// The previous file's slots: name -> counter values, and whether it stopped cleanly.
-fn read_previous(path: &Path) -> Option<(BTreeMap<String, [u64; 13]>, bool)> {
+fn read_previous(path: &Path) -> Option<(BTreeMap<String, [u64; N_COUNTERS]>, bool)> {
     let b = std::fs::read(path).ok()?;
     if b.len() < HEADER || &b[..8] != MAGIC {
         return None;
@@ -319,7 +347,7 @@ fn read_previous(path: &Path) -> Option<(BTreeMap<String, [u64; 13]>, bool)> {
         let Ok(name) = std::str::from_utf8(&name[..end]) else {
             continue;
         };
-        let mut v = [0u64; 13];
+        let mut v = [0u64; N_COUNTERS];
         for (k, x) in v.iter_mut().enumerate() {
             *x = u(at + NAME + 8 * k);
         }
@@ -377,14 +405,16 @@ impl CountersFile {
                 c.set_values(v);
                 if clean {
                     // The report has the counts; keep only where the stream was.
-                    let (seq, hi, lo, set) = (
+                    let (seq, hi, lo, set, index) = (
                         Counters::get(&c.last_seq_plus_one),
                         Counters::get(&c.origin_hi),
                         Counters::get(&c.origin_lo),
                         Counters::get(&c.origin_set),
+                        Counters::get(&c.last_index_plus_one),
                     );
-                    c.set_values(&[0; 13]);
+                    c.set_values(&[0; N_COUNTERS]);
                     c.last_seq_plus_one.store(seq, Ordering::Relaxed);
+                    c.last_index_plus_one.store(index, Ordering::Relaxed);
                     c.origin_hi.store(hi, Ordering::Relaxed);
                     c.origin_lo.store(lo, Ordering::Relaxed);
                     c.origin_set.store(set, Ordering::Relaxed);

@@ -21,6 +21,7 @@ pub mod percentile;
 pub mod perturber;
 pub mod registry;
 pub mod rng;
+pub mod route;
 pub mod sensor_model;
 pub mod synthetic;
 pub mod viz;

@@ -979,7 +979,7 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
                 let perturb_bridge::dds::Received::Cloud(c) = r.unwrap() else {
                     panic!("not a cloud")
                 };
-                got.push((seq.unwrap(), c.width, c.header.stamp_sec));
+                got.push((seq.unwrap().seq, c.width, c.header.stamp_sec));
             })
             .unwrap();
     }
@@ -1077,7 +1077,7 @@ fn ros1_client_against_rospy_both_ways_refusals_gaps_and_vanishing_peers() {
         while t.elapsed() < Duration::from_secs(5) {
             if gaps
                 .take(Duration::from_millis(50), &mut |seq, _| {
-                    seen.push(seq.unwrap())
+                    seen.push(seq.unwrap().seq)
                 })
                 .unwrap()
                 > 0

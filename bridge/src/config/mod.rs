@@ -24,11 +24,15 @@
 //! stream = "camera_front"
 //! transport = "dds"           # or "ros1"
 //! qos = { reliability = "best_effort", depth = 5, durability = "volatile" }   # DDS only
+//! camera_info = "/sensing/camera/front/camera_info"   # relayed with the images
 //!
 //! [[egress]]                  # <stream>/perturbed -> ROS 2 (or ROS 1) topic
 //! stream = "camera_front"
 //! topic = "/perturbed/camera/front/image_raw"
 //! transport = "dds"           # or "ros1"
+//! on_late = "raw"             # a frame late or without perturbd goes out raw; "drop": nothing
+//! deadline_ms = 33.3          # default: one frame period (rate_hz, else the measured rate)
+//! camera_info = "/camera_front/camera_info"   # relayed from the ingress's camera_info
 //!
 //! [replay]                    # bag -> <stream>/raw, with the original timing
 //! bag = "drive.mcap"
@@ -36,6 +40,22 @@
 //! start_offset = 0.0          # seconds into the bag
 //! loop = false
 //! topics = { "/kitti/camera_color_left/image_raw" = "camera_front" }   # empty: every sensor topic
+//!
+//! [events]                    # the perturbation log on the bus (std_msgs/String, JSON)
+//! topic = "/perturb/events"
+//! transport = "ros1"          # default: ROS 1 if an egress is, else ROS 2
+//! mode = "frames"             # or "changes": per change, plus a 1 Hz heartbeat per stream
+//!
+//! [kill]                      # the kill switch: raw frames from the next frame, until `perturb ctl arm`
+//! topic = "/vehicle/takeover"
+//! type = "std_msgs/msg/Bool"  # ROS 2 type (ROS 1: the publisher says); any type, by field path
+//! field = "data"
+//! kill_when = true            # or kill_unless = true (an engage flag)
+//! deadman_s = 0.5             # also kill when the topic is silent this long or its publisher leaves
+//!
+//! [pose]                      # the vehicle's position, for the daemon's campaign (route, geofence)
+//! topic = "/localization/current_pose"
+//! type = "geometry_msgs/msg/PoseStamped"   # ROS 2 type; any type with a position
 //!
 //! [record]                    # streams -> rosbag2 MCAP + /perturb/events
 //! out = "recording"
@@ -195,6 +215,10 @@ pub struct IngressEntry {
     /// QoS (sensor data by default; DDS only).
     #[serde(default)]
     pub qos: Qos,
+    /// The driver's `camera_info` topic (same transport), relayed with the stream's images by
+    /// the egress that names a `camera_info` sink.
+    #[serde(default)]
+    pub camera_info: Option<String>,
 }
 
 /// One `[[egress]]` entry.
@@ -214,6 +238,132 @@ pub struct EgressEntry {
     /// QoS (sensor data by default; DDS only).
     #[serde(default)]
     pub qos: Qos,
+    /// Milliseconds a raw frame waits for its perturbed version before `on_late` applies;
+    /// default one frame period of `rate_hz`, else of the rate measured on the stream.
+    #[serde(default)]
+    pub deadline_ms: Option<f64>,
+    /// The stream's nominal rate (frames per second), for the default deadline.
+    #[serde(default)]
+    pub rate_hz: Option<f64>,
+    /// What a frame that misses its deadline becomes: `raw` (the default: the raw frame goes out
+    /// in its place, as on a vehicle) or `drop` (nothing goes out, counted: timing studies).
+    #[serde(default)]
+    pub on_late: crate::guard::OnLate,
+    /// Where the stream's `camera_info` goes (the ingress of the stream names its source).
+    #[serde(default)]
+    pub camera_info: Option<String>,
+}
+
+/// `[events]`: the perturbation log on the bus.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EventsSection {
+    /// The topic (`/perturb/events`).
+    #[serde(default = "events_topic")]
+    pub topic: String,
+    /// ROS 1 or ROS 2; default the transport of the egress topics (ROS 1 if any is).
+    #[serde(default)]
+    pub transport: Option<Transport>,
+    /// `frames` (one record per frame published) or `changes` (per change, and a heartbeat per
+    /// stream once a second).
+    #[serde(default)]
+    pub mode: crate::events::EventsMode,
+}
+
+/// `[kill]`: the kill switch's topic.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KillSection {
+    /// The topic (`/vehicle/takeover`).
+    pub topic: String,
+    /// ROS 1 or ROS 2; default the transport of the egress topics (ROS 1 if any is).
+    #[serde(default)]
+    pub transport: Option<Transport>,
+    /// The ROS 2 type (`std_msgs/msg/Bool`, the default); over ROS 1 the publisher says.
+    #[serde(rename = "type", default = "bool_type")]
+    pub ros2_type: String,
+    /// The field path read (`data`, the default).
+    #[serde(default = "data_field")]
+    pub field: String,
+    /// Kill when the field equals this (default `true`).
+    #[serde(default)]
+    pub kill_when: Option<crate::kill::Expected>,
+    /// Kill when the field differs from this (an engage flag: `kill_unless = true`).
+    #[serde(default)]
+    pub kill_unless: Option<crate::kill::Expected>,
+    /// The type's definition (`.msg` text with its dependencies), for a ROS 2 type the bridge
+    /// does not know.
+    #[serde(default)]
+    pub definition: Option<String>,
+    /// Dead man: seconds of silence (after the first message), or the publisher gone, that
+    /// also kill. Absent: off.
+    #[serde(default)]
+    pub deadman_s: Option<f64>,
+    /// The daemon's control service.
+    #[serde(default = "control_service")]
+    pub control_service: String,
+}
+
+impl KillSection {
+    /// When it kills.
+    pub fn rule(&self) -> crate::kill::Rule {
+        match (&self.kill_when, &self.kill_unless) {
+            (_, Some(u)) => crate::kill::Rule::Unless(u.clone()),
+            (Some(w), None) => crate::kill::Rule::When(w.clone()),
+            (None, None) => crate::kill::Rule::When(crate::kill::Expected::Bool(true)),
+        }
+    }
+}
+
+/// `[pose]`: the vehicle's position, sent to the daemon for its campaign's route and geofence
+/// steps.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSection {
+    /// The topic (`/localization/current_pose`).
+    pub topic: String,
+    /// ROS 1 or ROS 2; default the transport of the egress topics (ROS 1 if any is).
+    #[serde(default)]
+    pub transport: Option<Transport>,
+    /// The ROS 2 type (default `geometry_msgs/msg/PoseStamped`); over ROS 1 the publisher says.
+    #[serde(rename = "type", default = "pose_type")]
+    pub ros2_type: String,
+    /// The position's field path (default: found from the type, e.g. `pose.pose.position`).
+    #[serde(default)]
+    pub field: Option<String>,
+    /// The type's definition, for a ROS 2 type the bridge does not know.
+    #[serde(default)]
+    pub definition: Option<String>,
+    /// At most this many positions a second go to the daemon (default 50).
+    #[serde(default = "pose_rate")]
+    pub max_rate_hz: f64,
+    /// The daemon's control service.
+    #[serde(default = "control_service")]
+    pub control_service: String,
+}
+
+fn pose_type() -> String {
+    "geometry_msgs/msg/PoseStamped".into()
+}
+
+fn pose_rate() -> f64 {
+    50.0
+}
+
+fn bool_type() -> String {
+    "std_msgs/msg/Bool".into()
+}
+
+fn data_field() -> String {
+    "data".into()
+}
+
+fn control_service() -> String {
+    perturb_wire::names::CONTROL.to_string()
+}
+
+fn events_topic() -> String {
+    perturb_bag::events::EVENTS_TOPIC.to_string()
 }
 
 /// `[replay]`.
@@ -394,6 +544,12 @@ pub struct Config {
     /// `[streams]`: what streams fed by another process carry (`camera_front = "image"`), for
     /// bridges that only record or only egress.
     pub streams: BTreeMap<String, StreamKind>,
+    /// `[events]`: publish the events records on the bus.
+    pub events: Option<EventsSection>,
+    /// `[kill]`: the kill switch's topic.
+    pub kill: Option<KillSection>,
+    /// `[pose]`: the vehicle's position, for the daemon's campaign.
+    pub pose: Option<PoseSection>,
 }
 
 /// A configuration error: the file, the key and the problem.
@@ -475,6 +631,36 @@ impl Config {
         self.ingress.iter().any(|i| i.transport == Transport::Ros1)
             || self.egress.iter().any(|e| e.transport == Transport::Ros1)
             || self.ros1.clock
+            || self.events_transport() == Some(Transport::Ros1)
+            || self.kill_transport() == Some(Transport::Ros1)
+            || self.pose_transport() == Some(Transport::Ros1)
+    }
+
+    /// The transport of the pose topic, if there is one.
+    pub fn pose_transport(&self) -> Option<Transport> {
+        let p = self.pose.as_ref()?;
+        Some(p.transport.unwrap_or(self.default_small_transport()))
+    }
+
+    /// The transport of the kill switch's topic, if there is one.
+    pub fn kill_transport(&self) -> Option<Transport> {
+        let k = self.kill.as_ref()?;
+        Some(k.transport.unwrap_or(self.default_small_transport()))
+    }
+
+    /// ROS 1 if an egress topic is on ROS 1, else ROS 2.
+    fn default_small_transport(&self) -> Transport {
+        if self.egress.iter().any(|e| e.transport == Transport::Ros1) {
+            Transport::Ros1
+        } else {
+            Transport::Dds
+        }
+    }
+
+    /// The transport of the events topic, if the bridge publishes one.
+    pub fn events_transport(&self) -> Option<Transport> {
+        let e = self.events.as_ref()?;
+        Some(e.transport.unwrap_or(self.default_small_transport()))
     }
 
     /// The ROS 1 node's settings (`[ros1]` with the environment's fallbacks).

@@ -33,6 +33,10 @@ impl Config {
         self.check_replay(&mut sourced)?;
         self.check_synthetic(&mut sourced)?;
         self.check_record()?;
+        self.check_camera_info(&ingress_topics, &egress_topics)?;
+        self.check_events(&ingress_topics, &egress_topics)?;
+        self.check_kill()?;
+        self.check_pose()?;
         self.check_ros1(&egress_topics)?;
         self.check_not_empty()
     }
@@ -46,6 +50,13 @@ impl Config {
                 "bridge.stop_after_publishers_gone".into(),
                 format!("{t} must be a number of seconds in (0, 86400]"),
             ));
+        }
+        self.bridge
+            .qos
+            .validate()
+            .map_err(|e| ("bridge.qos".to_string(), e))?;
+        if let Some(r) = &self.bridge.report {
+            check_parent("bridge.report", r)?;
         }
         if !self.ingress.is_empty() || !self.egress.is_empty() {
             crate::dds::interfaces::resolve(&self.dds.interfaces).map_err(|e| {
@@ -149,11 +160,13 @@ impl Config {
         for (i, c) in self.synthetic.camera.iter().enumerate() {
             let key = |field: &str| format!("synthetic.camera[{i}].{field}");
             check_stream(key("stream"), &c.stream)?;
+            check_frame_id(key("frame_id"), &c.frame_id)?;
             claim_source(sourced, key("stream"), &c.stream)?;
             check_synthetic_camera(c).map_err(|(field, problem)| (key(&field), problem))?;
         }
         for (i, l) in self.synthetic.lidar.iter().enumerate() {
             check_stream(format!("synthetic.lidar[{i}].stream"), &l.stream)?;
+            check_frame_id(format!("synthetic.lidar[{i}].frame_id"), &l.frame_id)?;
             claim_source(sourced, format!("synthetic.lidar[{i}].stream"), &l.stream)?;
             if !(l.rate_hz > 0.0 && l.rate_hz <= 100.0) {
                 return Err((
@@ -217,6 +230,199 @@ impl Config {
         Ok(())
     }
 
+    /// The deadlines of `[[egress]]` entries.
+    fn check_deadline(i: usize, e: &super::EgressEntry) -> Result<(), Problem> {
+        if let Some(d) = e.deadline_ms
+            && !(d.is_finite() && d > 0.0 && d <= 10_000.0)
+        {
+            return Err((
+                format!("egress[{i}].deadline_ms"),
+                format!("{d} must be in (0, 10000] milliseconds"),
+            ));
+        }
+        if let Some(r) = e.rate_hz
+            && !(r.is_finite() && r > 0.0 && r <= 1000.0)
+        {
+            return Err((
+                format!("egress[{i}].rate_hz"),
+                format!("{r} must be in (0, 1000] frames per second"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `camera_info` on ingress and egress entries: valid topics, each sink fed by an ingress
+    /// of the same stream on the same transport, no topic read or written twice.
+    fn check_camera_info(
+        &self,
+        ingress_topics: &Topics,
+        egress_topics: &Topics,
+    ) -> Result<(), Problem> {
+        let mut read = ingress_topics.clone();
+        for (i, e) in self.ingress.iter().enumerate() {
+            let Some(t) = &e.camera_info else { continue };
+            let key = format!("ingress[{i}].camera_info");
+            check_topic(key.clone(), t)?;
+            if e.ros_type == crate::dds::RosType::PointCloud2 {
+                return Err((key, "a point cloud stream has no camera_info".into()));
+            }
+            if !read.insert((e.transport, t.clone())) {
+                return Err((key, format!("`{t}` is read twice")));
+            }
+        }
+        let mut written = egress_topics.clone();
+        for (i, e) in self.egress.iter().enumerate() {
+            Self::check_deadline(i, e)?;
+            let Some(t) = &e.camera_info else { continue };
+            let key = format!("egress[{i}].camera_info");
+            check_topic(key.clone(), t)?;
+            let source = self
+                .ingress
+                .iter()
+                .find(|g| g.stream == e.stream && g.camera_info.is_some());
+            match source {
+                None => {
+                    return Err((
+                        key,
+                        format!(
+                            "no [[ingress]] of stream `{}` names the camera_info to relay (add `camera_info = \"<the driver's camera_info topic>\"` to it)",
+                            e.stream
+                        ),
+                    ));
+                }
+                Some(g) if g.transport != e.transport => {
+                    return Err((
+                        key,
+                        "camera_info is relayed unchanged, so its source and sink must be on the same transport (both ROS 1 or both ROS 2)".into(),
+                    ));
+                }
+                Some(_) => {}
+            }
+            if read.contains(&(e.transport, t.clone())) {
+                return Err((
+                    key,
+                    format!("`{t}` is also read by this bridge: it would read its own output"),
+                ));
+            }
+            if !written.insert((e.transport, t.clone())) {
+                return Err((key, format!("`{t}` is written twice")));
+            }
+        }
+        Ok(())
+    }
+
+    /// `[events]`: a valid topic nobody else reads or writes here.
+    fn check_events(&self, ingress_topics: &Topics, egress_topics: &Topics) -> Result<(), Problem> {
+        let (Some(e), Some(transport)) = (&self.events, self.events_transport()) else {
+            return Ok(());
+        };
+        check_topic("events.topic".into(), &e.topic)?;
+        let pair = (transport, e.topic.clone());
+        if ingress_topics.contains(&pair) || egress_topics.contains(&pair) {
+            return Err((
+                "events.topic".into(),
+                format!("`{}` is also an ingress or egress topic", e.topic),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `[kill]`: a valid topic, one rule, a usable dead-man time, a definition for an unknown
+    /// ROS 2 type.
+    fn check_kill(&self) -> Result<(), Problem> {
+        let (Some(k), Some(transport)) = (&self.kill, self.kill_transport()) else {
+            return Ok(());
+        };
+        check_topic("kill.topic".into(), &k.topic)?;
+        if k.kill_when.is_some() && k.kill_unless.is_some() {
+            return Err((
+                "kill.kill_unless".into(),
+                "give `kill_when` or `kill_unless`, not both".into(),
+            ));
+        }
+        if let Some(d) = k.deadman_s
+            && !(d.is_finite() && d > 0.0 && d <= 3600.0)
+        {
+            return Err((
+                "kill.deadman_s".into(),
+                format!("{d} must be in (0, 3600] seconds"),
+            ));
+        }
+        if transport == Transport::Dds {
+            let def = match &k.definition {
+                Some(d) => d.clone(),
+                None => crate::msgs::ros2_definition(&k.ros2_type).ok_or_else(|| {
+                    (
+                        "kill.definition".to_string(),
+                        format!(
+                            "the bridge does not know the ROS 2 type `{}`: give its definition (the .msg text with its dependencies)",
+                            k.ros2_type
+                        ),
+                    )
+                })?,
+            };
+            let codec = perturb_bag::dynamic::MessageCodec::new(
+                &k.ros2_type,
+                "ros2msg",
+                def.as_bytes(),
+                "cdr",
+            )
+            .map_err(|e| ("kill.definition".to_string(), e.to_string()))?;
+            codec
+                .path(&k.field)
+                .map_err(|e| ("kill.field".to_string(), e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// `[pose]`: a valid topic and rate, a definition for an unknown ROS 2 type.
+    fn check_pose(&self) -> Result<(), Problem> {
+        let (Some(p), Some(transport)) = (&self.pose, self.pose_transport()) else {
+            return Ok(());
+        };
+        check_topic("pose.topic".into(), &p.topic)?;
+        if !(p.max_rate_hz.is_finite() && p.max_rate_hz > 0.0 && p.max_rate_hz <= 1000.0) {
+            return Err((
+                "pose.max_rate_hz".into(),
+                format!("{} must be in (0, 1000]", p.max_rate_hz),
+            ));
+        }
+        if transport == Transport::Dds {
+            let def = match &p.definition {
+                Some(d) => d.clone(),
+                None => crate::msgs::ros2_definition(&p.ros2_type).ok_or_else(|| {
+                    (
+                        "pose.definition".to_string(),
+                        format!(
+                            "the bridge does not know the ROS 2 type `{}`: give its definition",
+                            p.ros2_type
+                        ),
+                    )
+                })?,
+            };
+            let codec = perturb_bag::dynamic::MessageCodec::new(
+                &p.ros2_type,
+                "ros2msg",
+                def.as_bytes(),
+                "cdr",
+            )
+            .map_err(|e| ("pose.definition".to_string(), e.to_string()))?;
+            let base = match &p.field {
+                Some(f) => f.trim_end_matches(".x").to_string(),
+                None => perturb_bag::dynamic::position_path(&codec).ok_or_else(|| {
+                    (
+                        "pose.field".to_string(),
+                        format!("cannot tell where the position is in `{}`", p.ros2_type),
+                    )
+                })?,
+            };
+            codec
+                .path(&format!("{base}.x"))
+                .map_err(|e| ("pose.field".to_string(), e.to_string()))?;
+        }
+        Ok(())
+    }
+
     /// `[ros1]`: `/clock` only from a replay and not written twice; the node's settings.
     fn check_ros1(&self, egress_topics: &Topics) -> Result<(), Problem> {
         if self.ros1.clock {
@@ -249,7 +455,9 @@ impl Config {
             || self.replay.is_some()
             || self.record.is_some()
             || !self.synthetic.camera.is_empty()
-            || !self.synthetic.lidar.is_empty();
+            || !self.synthetic.lidar.is_empty()
+            || self.kill.is_some()
+            || self.pose.is_some();
         if !anything {
             return Err((
                 "(file)".into(),
@@ -312,24 +520,44 @@ fn claim_source(sourced: &mut BTreeSet<String>, key: String, stream: &str) -> Re
     Ok(())
 }
 
-/// A stream name: 1-200 characters, no `.` or `..` segments, not starting with `/`, no `//`.
-fn check_stream(key: String, s: &str) -> Result<(), Problem> {
-    let path_like = s.split('/').any(|part| part == "." || part == "..");
-    if path_like {
-        return Err((
-            key,
-            format!("stream name `{s}` contains `.` or `..` segments: a stream name is not a path"),
-        ));
-    }
-    if s.is_empty() || s.len() > 200 || s.starts_with('/') || s.contains("//") {
+/// A frame_id the wire header can carry (at most [`perturb_wire::header::FRAME_ID_LEN`] bytes).
+fn check_frame_id(key: String, f: &str) -> Result<(), Problem> {
+    let max = perturb_wire::header::FRAME_ID_LEN;
+    if f.len() > max || f.contains('\0') {
         return Err((
             key,
             format!(
-                "stream name `{s}` must be 1-200 characters, not start with `/` nor contain `//`"
+                "frame_id of {} bytes: the frame header holds at most {max} bytes, without NUL",
+                f.len()
             ),
         ));
     }
     Ok(())
+}
+
+/// A file to be written: its folder must exist (a report or state file that cannot be written
+/// would be noticed only when the bridge stops).
+fn check_parent(key: &str, path: &std::path::Path) -> Result<(), Problem> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    if !dir.is_dir() {
+        return Err((
+            key.to_string(),
+            format!(
+                "{}: the folder {} does not exist",
+                path.display(),
+                dir.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A stream name, by the rule the daemon uses too ([`perturb_wire::names::check_stream`]).
+fn check_stream(key: String, s: &str) -> Result<(), Problem> {
+    perturb_wire::names::check_stream(s).map_err(|e| (key, e))
 }
 
 /// A ROS topic name: absolute, `/`-separated tokens of letters, digits and `_`, none starting

@@ -334,3 +334,166 @@ impl DdsReader for RustddsReader {
         drain(&self.reader, &self.spec, f)
     }
 }
+
+/// A writer of CDR messages of any type on one topic (small messages: events, relays).
+pub struct RawWriter {
+    writer: no_key::DataWriter<RawCdr, RawWriteAdapter>,
+    topic: String,
+}
+
+impl RawWriter {
+    /// Publishes one message: CDR with its 4-byte encapsulation header (little-endian).
+    pub fn write(&mut self, cdr: &[u8]) -> Result<(), DdsError> {
+        let body = cdr.get(4..).ok_or_else(|| DdsError::Write {
+            topic: self.topic.clone(),
+            reason: format!(
+                "a CDR message of {} bytes has no encapsulation header",
+                cdr.len()
+            ),
+        })?;
+        self.writer
+            .write(
+                RawCdr(Bytes::copy_from_slice(body)),
+                Some(rustdds::Timestamp::now()),
+            )
+            .map_err(|e| DdsError::Write {
+                topic: self.topic.clone(),
+                reason: e.to_string(),
+            })
+    }
+}
+
+/// A reader of CDR messages of any type on one topic.
+pub struct RawReader {
+    reader: no_key::SimpleDataReader<Taken, RawReadAdapter>,
+    poll: mio1::Poll,
+    events: mio1::Events,
+    topic: String,
+}
+
+// SAFETY: as for `RustddsReader`: used from one thread at a time (`&mut self`), RustDDS keeps its
+// state behind Arc/Mutex and channels that are Send, the mio Poll is Send.
+// A Send marker for RustDDS's reader.
+#[allow(unsafe_code)]
+unsafe impl Send for RawReader {}
+
+impl RawReader {
+    /// Waits up to `timeout` and passes every available message to `f` as CDR with its
+    /// encapsulation header; returns how many.
+    pub fn take(&mut self, timeout: Duration, f: &mut dyn FnMut(&[u8])) -> Result<usize, DdsError> {
+        let mut n = self.drain(f)?;
+        if n == 0 {
+            self.poll
+                .poll(&mut self.events, Some(timeout))
+                .map_err(|e| DdsError::Read {
+                    topic: self.topic.clone(),
+                    reason: e.to_string(),
+                })?;
+            n = self.drain(f)?;
+        }
+        Ok(n)
+    }
+
+    fn drain(&self, f: &mut dyn FnMut(&[u8])) -> Result<usize, DdsError> {
+        let mut n = 0usize;
+        let mut buf = Vec::new();
+        let mut cb = |body: &[u8], le: bool| {
+            n += 1;
+            buf.clear();
+            buf.extend_from_slice(&[0, u8::from(le), 0, 0]);
+            buf.extend_from_slice(body);
+            f(&buf);
+        };
+        {
+            let cell: Callback<'_> = RefCell::new(&mut cb);
+            loop {
+                self.reader.drain_read_notifications();
+                match self.reader.try_take_one_with(CallbackDecoder(&cell)) {
+                    Ok(Some(_)) => continue,
+                    Ok(None) => break,
+                    Err(e) => {
+                        return Err(DdsError::Read {
+                            topic: self.topic.clone(),
+                            reason: e.to_string(),
+                        });
+                    }
+                }
+            }
+        }
+        Ok(n)
+    }
+
+    /// Writers matched now (not reported by this backend).
+    pub fn publishers(&self) -> Option<usize> {
+        None
+    }
+}
+
+impl RustddsBackend {
+    fn raw_topic(
+        &self,
+        topic: &str,
+        dds_type: &str,
+        qos: super::Qos,
+    ) -> Result<(rustdds::Topic, QosPolicies), DdsError> {
+        let spec = TopicSpec {
+            topic: topic.to_string(),
+            ros_type: RosType::Image,
+            qos,
+        };
+        let qos: QosPolicies = (&profile(&spec)).into();
+        let t = self
+            .context
+            .domain_participant()
+            .create_topic(
+                spec.dds_topic(),
+                dds_type.to_string(),
+                &qos,
+                TopicKind::NoKey,
+            )
+            .map_err(|e| setup(topic, e))?;
+        Ok((t, qos))
+    }
+
+    /// A writer of `dds_type` (`std_msgs::msg::dds_::String_`) on the ROS 2 `topic`.
+    pub fn raw_writer(
+        &self,
+        topic: &str,
+        dds_type: &str,
+        qos: super::Qos,
+    ) -> Result<RawWriter, DdsError> {
+        let (t, q) = self.raw_topic(topic, dds_type, qos)?;
+        let writer = self
+            .publisher
+            .create_datawriter_no_key::<RawCdr, RawWriteAdapter>(&t, Some(q))
+            .map_err(|e| setup(topic, e))?;
+        Ok(RawWriter {
+            writer,
+            topic: topic.to_string(),
+        })
+    }
+
+    /// A reader of `dds_type` on the ROS 2 `topic`.
+    pub fn raw_reader(
+        &self,
+        topic: &str,
+        dds_type: &str,
+        qos: super::Qos,
+    ) -> Result<RawReader, DdsError> {
+        let (t, q) = self.raw_topic(topic, dds_type, qos)?;
+        let mut reader = self
+            .subscriber
+            .create_simple_datareader_no_key::<Taken, RawReadAdapter>(&t, Some(q))
+            .map_err(|e| setup(topic, e))?;
+        let poll = mio1::Poll::new().map_err(|e| setup(topic, e))?;
+        poll.registry()
+            .register(&mut reader, mio1::Token(0), mio1::Interest::READABLE)
+            .map_err(|e| setup(topic, e))?;
+        Ok(RawReader {
+            reader,
+            poll,
+            events: mio1::Events::with_capacity(4),
+            topic: topic.to_string(),
+        })
+    }
+}

@@ -31,7 +31,7 @@ pub use subscriber::Subscriber;
 
 use crate::dds::{Received, RosType, TopicSpec};
 use crate::frame::Payload;
-use crate::topic::{OnMessage, TopicReader, TopicWriter};
+use crate::topic::{OnMessage, Ros1Seq, TopicReader, TopicWriter};
 use perturb_core::formats::ros::{CompressedImageMsg, ImageMsg, PointCloud2Msg};
 use perturb_core::formats::ros1::{self, MsgType};
 use std::collections::HashMap;
@@ -170,10 +170,15 @@ impl TopicReader1 {
         })
     }
 
-    fn count_gap(&mut self, publisher: &Arc<str>, seq: u32) {
+    /// Messages of `publisher` missing before `seq` (counted in `lost`).
+    fn count_gap(&mut self, publisher: &Arc<str>, seq: u32) -> u32 {
         match self.last.insert(publisher.clone(), seq) {
-            Some(prev) if seq > prev => self.lost += (seq - prev - 1) as u64,
-            _ => {}
+            Some(prev) if seq > prev => {
+                let gap = seq - prev - 1;
+                self.lost += u64::from(gap);
+                gap
+            }
+            _ => 0,
         }
     }
 }
@@ -185,8 +190,8 @@ impl TopicReader for TopicReader1 {
         while let Some(m) = next {
             match decode(self.ty, &m.data) {
                 Ok((seq, msg)) => {
-                    self.count_gap(&m.publisher, seq);
-                    f(Some(seq), Ok(msg));
+                    let lost_before = self.count_gap(&m.publisher, seq);
+                    f(Some(Ros1Seq { seq, lost_before }), Ok(msg));
                 }
                 Err(e) => f(None, Err(e)),
             }

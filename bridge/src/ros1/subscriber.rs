@@ -22,11 +22,27 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tracing::{debug, error, info, warn};
 
+/// What a publisher said of its messages when the link was made (its TCPROS header): what a
+/// subscription of any type (`*`) needs to decode them.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ConnInfo {
+    /// The publishing node.
+    pub callerid: String,
+    /// The message type (`std_msgs/Bool`).
+    pub type_name: String,
+    /// Its md5sum.
+    pub md5sum: String,
+    /// Its full definition.
+    pub definition: String,
+}
+
 /// One received message.
 #[derive(Debug)]
 pub struct Incoming {
     /// The publisher's XML-RPC URI.
     pub publisher: Arc<str>,
+    /// What the publisher said of its messages.
+    pub conn: Arc<ConnInfo>,
     /// The serialized message (without its length prefix).
     pub data: Vec<u8>,
 }
@@ -230,7 +246,7 @@ impl SubShared {
             return Err(LinkError::Refused(err.clone()));
         }
         let md5 = h.get("md5sum").map(String::as_str).unwrap_or("");
-        if md5 != self.ty.md5sum && md5 != "*" {
+        if md5 != self.ty.md5sum && md5 != "*" && self.ty.md5sum != "*" {
             return Err(LinkError::Refused(format!(
                 "it publishes [{}] with md5sum {md5}, this bridge reads [{}] ({})",
                 h.get("type").map(String::as_str).unwrap_or("?"),
@@ -239,6 +255,13 @@ impl SubShared {
             )));
         }
         let _ = stream.set_read_timeout(None);
+        let field = |k: &str| h.get(k).cloned().unwrap_or_default();
+        let conn = Arc::new(ConnInfo {
+            callerid: field("callerid"),
+            type_name: field("type"),
+            md5sum: field("md5sum"),
+            definition: field("message_definition"),
+        });
         link.connected.store(true, Ordering::Relaxed);
         info!(topic = %self.topic, publisher = %link.uri, "connected to the ROS 1 publisher {}", h.get("callerid").map(String::as_str).unwrap_or("?"));
         let mut r = std::io::BufReader::with_capacity(1 << 16, &stream);
@@ -247,6 +270,7 @@ impl SubShared {
             match tcpros::read_message(&mut r, &mut buf) {
                 Ok(()) => self.push(Incoming {
                     publisher: link.uri.clone(),
+                    conn: conn.clone(),
                     data: buf,
                 }),
                 Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(()),

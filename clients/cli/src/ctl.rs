@@ -13,10 +13,15 @@ use std::time::Duration;
 #[command(after_help = "Examples:
   perturb ctl set cam_front C-C7 --severity 3 --seed 42
   perturb ctl off cam_front
+  perturb ctl off --all --reason 'safety driver took over'   # the kill switch (latched)
+  perturb ctl arm                                              # release it
+  perturb ctl campaign config/campaign.toml   # run a campaign; `perturb ctl next` for its manual steps
   perturb ctl status
   perturb ctl stats --json
 
 A change takes effect on the stream's next frame; the daemon acknowledges it (or says why not).
+`off --all` is the kill switch: every stream passes raw frames from its next frame on and stays so,
+across daemon restarts too, until `perturb ctl arm`; then each stream runs what it is set to.
 The daemon is found in the iceoryx2 namespace given by --iox2-prefix/--iox2-root/--iox2-config,
 else by $PERTURB_IOX2_PREFIX, $PERTURB_IOX2_ROOT, $PERTURB_IOX2_CONFIG, else iceoryx2's defaults.")]
 pub struct Args {
@@ -54,10 +59,32 @@ enum Command {
         #[arg(long)]
         seed: Option<u64>,
     },
-    /// Switch a stream's perturbation off (frames are forwarded unchanged).
+    /// Switch a stream's perturbation off (frames are forwarded unchanged), or with `--all`
+    /// engage the kill switch.
     Off {
         /// Stream name.
-        stream: String,
+        #[arg(required_unless_present = "all", conflicts_with = "all")]
+        stream: Option<String>,
+        /// The kill switch: every stream passes raw frames from the next frame on, latched until
+        /// `perturb ctl arm` (also across daemon restarts).
+        #[arg(long)]
+        all: bool,
+        /// Why (logged by the daemon and reported by `status`), with `--all`.
+        #[arg(long, requires = "all")]
+        reason: Option<String>,
+    },
+    /// Release the kill switch: every stream runs what it is set to from its next frame on.
+    Arm,
+    /// The running campaign's next manual step.
+    Next,
+    /// Start a campaign (its streams follow its steps from now on), end it with `--stop`, or
+    /// show the running one.
+    Campaign {
+        /// The campaign file (TOML; see config/campaign.toml), as the daemon's machine sees it.
+        file: Option<PathBuf>,
+        /// End the running campaign (its streams pass raw frames).
+        #[arg(long, conflicts_with = "file")]
+        stop: bool,
     },
     /// Show every stream's active perturbation and counters.
     Status {
@@ -108,7 +135,38 @@ pub fn run(a: Args) -> Result<()> {
             false,
             false,
         ),
-        Command::Off { stream } => (ControlRequest::Off { stream }, false, false),
+        Command::Off {
+            all: true, reason, ..
+        } => (
+            ControlRequest::Kill {
+                reason: Some(reason.unwrap_or_else(|| "perturb ctl off --all".into())),
+            },
+            false,
+            false,
+        ),
+        Command::Off { stream, .. } => (
+            ControlRequest::Off {
+                stream: stream.unwrap_or_default(),
+            },
+            false,
+            false,
+        ),
+        Command::Arm => (ControlRequest::Arm, false, false),
+        Command::Next => (ControlRequest::Next, false, false),
+        Command::Campaign { file, stop } => (
+            ControlRequest::Campaign {
+                // The daemon reads the file: hand it an absolute path.
+                file: file.map(|f| {
+                    std::path::absolute(&f)
+                        .unwrap_or(f)
+                        .to_string_lossy()
+                        .into_owned()
+                }),
+                stop,
+            },
+            false,
+            false,
+        ),
         Command::Status { json } => (ControlRequest::Status, json, false),
         Command::Stats { json } => (ControlRequest::Stats, json, true),
     };
@@ -125,6 +183,32 @@ fn print_response(resp: &ControlResponse, json: bool, latency: bool) -> Result<(
     }
     if let Some(m) = &resp.message {
         println!("{m}");
+    }
+    if let (Some(c), false) = (&resp.campaign, json) {
+        println!(
+            "campaign `{}` ({}): {:.1} s, {} next; position {}; active: {}",
+            c.name,
+            c.file,
+            c.elapsed_s,
+            c.next,
+            match (c.pose, c.arc_length_m) {
+                (Some(p), Some(s)) =>
+                    format!("({:.1}, {:.1}), {s:.1} m along the route", p[0], p[1]),
+                (Some(p), None) => format!("({:.1}, {:.1})", p[0], p[1]),
+                _ => "none yet".into(),
+            },
+            if c.active.is_empty() {
+                "none".to_string()
+            } else {
+                c.active.join(", ")
+            }
+        );
+    }
+    if let (Some(k), false, Some(_)) = (&resp.killed, json, &resp.streams) {
+        println!(
+            "KILL SWITCH ENGAGED ({}): every stream passes raw frames until `perturb ctl arm`",
+            k.reason
+        );
     }
     if let Some(streams) = &resp.streams {
         if json {
@@ -193,18 +277,15 @@ fn print_stats(streams: &[StreamReport]) {
             println!("{:<16} {:<16} {}", s.name, what, lat(v));
         }
         println!(
-            "{:<16} {:<16} {} of {} frames over the {} ms budget; dropped {} (queue {}, upstream {}, output {}, daemon restart {}); perturbation failed {}",
+            "{:<16} {:<16} {} of {} frames over the {} ms budget; perturbation failed {}",
+            s.name, "budget", s.over_budget, s.frames_out, s.budget_ms, s.perturb_failed
+        );
+        println!(
+            "{:<16} {:<16} {} not published by the daemon, by cause: {}",
             s.name,
-            "budget",
-            s.over_budget,
-            s.frames_out,
-            s.budget_ms,
-            s.dropped,
-            s.dropped_queue,
-            s.dropped_upstream,
-            s.dropped_output,
-            s.dropped_restart,
-            s.perturb_failed
+            "lost",
+            s.lost.total(),
+            s.lost.describe()
         );
     }
 }

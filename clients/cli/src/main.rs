@@ -8,6 +8,7 @@ mod apply;
 mod augment;
 mod batch;
 mod bench;
+mod campaign;
 mod ctl;
 mod demo;
 mod demo_offline;
@@ -67,6 +68,8 @@ enum Command {
     Bench(bench::Args),
     /// Control a running perturbd: set or switch off a stream's perturbation, show status and stats.
     Ctl(ctl::Args),
+    /// Perturbation campaigns: check one, or dry-run it on a recorded drive.
+    Campaign(campaign::Args),
 }
 
 /// Behave like a Unix tool when the reader of stdout goes away (`perturb list | head`): exit
@@ -97,6 +100,7 @@ fn main() {
         Command::Bench(a) => bench::run(a),
         Command::Demo(a) => demo::run(a),
         Command::Ctl(a) => ctl::run(a),
+        Command::Campaign(a) => campaign::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", message(&e));

@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 pub const CONTROL_VERSION: u32 = 1;
 
 /// A control request.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "cmd", rename_all = "lowercase", deny_unknown_fields)]
 pub enum ControlRequest {
     /// Activate perturbation `id` at `severity` on `stream` (seed: keep the stream's current
@@ -46,6 +46,36 @@ pub enum ControlRequest {
     Status,
     /// Counters and latencies of every stream.
     Stats,
+    /// The kill switch: every stream passes raw frames from the next frame on and stays so,
+    /// across daemon restarts, until [`ControlRequest::Arm`] (`perturb ctl off --all`).
+    Kill {
+        /// What engaged it (logged, reported, in the events).
+        #[serde(default)]
+        reason: Option<String>,
+    },
+    /// Releases the kill switch: each stream goes back to what it is set to run
+    /// (`perturb ctl arm`).
+    Arm,
+    /// The vehicle's position in the map frame, for a campaign's route and geofence steps (sent
+    /// by the bridge from the pose topic).
+    Pose {
+        /// x, metres.
+        x: f64,
+        /// y, metres.
+        y: f64,
+    },
+    /// The next manual step of the campaign (`perturb ctl next`).
+    Next,
+    /// Starts the campaign in `file` (replacing the one running), or with `stop` ends it (its
+    /// streams pass raw frames); without either, says which runs (`perturb ctl campaign`).
+    Campaign {
+        /// The campaign file to start (a path the daemon can read).
+        #[serde(default)]
+        file: Option<String>,
+        /// End the running campaign.
+        #[serde(default)]
+        stop: bool,
+    },
 }
 
 /// The envelope on the wire: version + request.
@@ -109,14 +139,23 @@ pub struct StreamReport {
     pub frames_in: u64,
     /// Frames published on the output service.
     pub frames_out: u64,
-    /// Frames dropped, all causes: `dropped_queue + dropped_upstream + dropped_output +
-    /// dropped_restart`.
+    /// Frames dropped, all causes: `dropped_queue + dropped_input + dropped_down +
+    /// dropped_upstream + dropped_output + dropped_restart` (the same frames as `lost`, by
+    /// cause).
     pub dropped: u64,
     /// Dropped because the worker fell behind (oldest pending frame replaced).
     pub dropped_queue: u64,
-    /// Missing sequence numbers on the input (overwritten in the input queue before the
-    /// receiver got them, or lost before the daemon).
+    /// Lost before the middleware (sensor, driver, network): gaps the source saw in the
+    /// sensor's own sequence numbers, reported frame by frame (`lost_before` in the header).
     pub dropped_upstream: u64,
+    /// Sent by the input's publisher while this daemon ran but never received: its input queue
+    /// overflowed because it was stalled (SIGSTOP) or overloaded.
+    #[serde(default)]
+    pub dropped_input: u64,
+    /// Sent by the input's publisher while no daemon ran (killed, crashed, restarting, not
+    /// started yet); counted by the daemon that came next.
+    #[serde(default)]
+    pub dropped_down: u64,
     /// Perturbed but could not be published (no output sample, transport failure).
     pub dropped_output: u64,
     /// Taken in by a daemon that was killed before it published them (counted by the daemon
@@ -133,9 +172,87 @@ pub struct StreamReport {
     pub budget_ms: f64,
     /// Sequence number of the last frame received.
     pub last_seq: Option<u64>,
+    /// The frames the daemon did not publish, by cause (the causes every report uses).
+    #[serde(default)]
+    pub lost: LostByCause,
+    /// True while the kill switch holds every stream off (until `perturb ctl arm`).
+    #[serde(default)]
+    pub killed: bool,
+    /// The campaign step that set the stream's perturbation (1-based; 0: none).
+    #[serde(default)]
+    pub step: u16,
     /// Latencies (in `stats` only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub latency: Option<StreamLatency>,
+}
+
+/// Frames lost, by cause: the same causes, with the same names, in `perturb ctl stats`, the
+/// bridge's and the recorder's reports and the events channel. Each place counts the causes it
+/// can see (the daemon cannot see a slow subscriber of the egress, the egress cannot see a
+/// sensor's own drops on another bridge), and where two places see the same cause they count
+/// the same frames.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LostByCause {
+    /// Before the middleware: the sensor, its driver, the network (gaps in a ROS 1 publisher's
+    /// header `seq`, counted per publisher by the ingress).
+    pub upstream: u64,
+    /// The daemon was not running (killed, crashed, restarting): published into the raw stream
+    /// while no daemon read it, or taken in by a daemon that died before publishing them.
+    pub daemon_down: u64,
+    /// The daemon ran but did not keep up (stalled, overloaded): its input queue overflowed,
+    /// its worker dropped the oldest waiting frame, or (egress) the perturbed frame came after
+    /// its deadline.
+    pub daemon_late: u64,
+    /// The daemon could not publish a frame it had perturbed (no free output sample).
+    pub daemon_output: u64,
+    /// The egress could not deliver: a subscriber slower than the stream (ROS 1 queue full) or
+    /// a write that failed.
+    pub egress: u64,
+    /// The recorder could not write a frame into the bag.
+    pub recorder: u64,
+}
+
+impl LostByCause {
+    /// Every cause with its name, in a fixed order (for tables and logs).
+    pub fn causes(&self) -> [(&'static str, u64); 6] {
+        [
+            ("upstream", self.upstream),
+            ("daemon_down", self.daemon_down),
+            ("daemon_late", self.daemon_late),
+            ("daemon_output", self.daemon_output),
+            ("egress", self.egress),
+            ("recorder", self.recorder),
+        ]
+    }
+
+    /// All causes together.
+    pub fn total(&self) -> u64 {
+        self.causes().iter().map(|(_, n)| n).sum()
+    }
+
+    /// `upstream 3, daemon_down 40` (causes with a count only; `none` when nothing was lost).
+    pub fn describe(&self) -> String {
+        let parts: Vec<String> = self
+            .causes()
+            .iter()
+            .filter(|(_, n)| *n > 0)
+            .map(|(k, n)| format!("{k} {n}"))
+            .collect();
+        if parts.is_empty() {
+            "none".into()
+        } else {
+            parts.join(", ")
+        }
+    }
+}
+
+/// Why and when the kill switch was engaged.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct KillRecord {
+    /// What engaged it (`perturb ctl off --all`, `kill topic /vehicle/takeover`, ...).
+    pub reason: String,
+    /// Unix time, seconds.
+    pub since_unix_s: f64,
 }
 
 /// An answer.
@@ -152,6 +269,31 @@ pub struct ControlResponse {
     /// Per-stream reports (status, stats).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub streams: Option<Vec<StreamReport>>,
+    /// The kill switch, when engaged (status, stats, kill).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub killed: Option<KillRecord>,
+    /// The running campaign (status, stats, campaign, next).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub campaign: Option<CampaignStatus>,
+}
+
+/// What a running campaign is doing.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CampaignStatus {
+    /// Its name.
+    pub name: String,
+    /// Its file.
+    pub file: String,
+    /// Seconds since it started.
+    pub elapsed_s: f64,
+    /// How many times `next` was called.
+    pub next: usize,
+    /// The vehicle's last position, if any came.
+    pub pose: Option<[f64; 2]>,
+    /// Its arc length along the route, if on the route.
+    pub arc_length_m: Option<f64>,
+    /// The steps active now, by name.
+    pub active: Vec<String>,
 }
 
 impl ControlResponse {
@@ -312,7 +454,7 @@ impl ControlClient {
             }
             if start.elapsed() > timeout {
                 return Err(WireError::Control(format!(
-                    "perturbd did not answer on `{}` within {:.1} s (is it running and not stuck?)",
+                    "perturbd did not answer on `{}` within {:.1} s: it may be busy (a heavy perturbation on every stream, a loaded machine) or stopped; try a longer --timeout, and see its log",
                     self.service,
                     timeout.as_secs_f64()
                 )));

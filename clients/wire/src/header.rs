@@ -28,7 +28,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 4] = *b"PTRB";
 /// The wire format version this build reads and writes. Bumped on every incompatible change of
 /// [`FrameHeader`]; the iceoryx2 type name carries it too.
-pub const WIRE_VERSION: u16 = 2;
+pub const WIRE_VERSION: u16 = 3;
 /// Most PointCloud2 fields a header can describe. Velodyne drivers publish 6, Ouster 9, Hesai 6,
 /// Livox 7; a cloud with more fields is refused with a clear error at publish time.
 pub const MAX_FIELDS: usize = 16;
@@ -42,6 +42,9 @@ pub const FRAME_ID_LEN: usize = 256;
 pub const ENCODING_LEN: usize = 32;
 /// Longest perturbation ID, in bytes.
 pub const PERTURBATION_ID_LEN: usize = 16;
+/// [`FrameHeader::flags`]: the daemon's kill switch was engaged when it published the frame
+/// (every stream passes raw frames until `perturb ctl arm`).
+pub const FLAG_KILLED: u8 = 1;
 
 /// What a sample holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -117,13 +120,13 @@ impl WireField {
     };
 }
 
-/// The user header of every camera and LiDAR sample (1160 bytes, `#[repr(C)]`, no pointers).
+/// The user header of every camera and LiDAR sample (1176 bytes, `#[repr(C)]`, no pointers).
 ///
 /// All integers are in the host's byte order (shared memory never leaves the machine). Text fields
 /// are UTF-8, NUL-padded. The iceoryx2 type name `perturb::FrameHeader.v<WIRE_VERSION>` makes
 /// iceoryx2 itself refuse to connect a peer compiled against another version of this struct.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ZeroCopySend)]
-#[type_name("perturb::FrameHeader.v2")]
+#[type_name("perturb::FrameHeader.v3")]
 #[repr(C)]
 pub struct FrameHeader {
     /// [`MAGIC`].
@@ -149,6 +152,11 @@ pub struct FrameHeader {
     pub t_daemon_rx_ns: u64,
     /// CLOCK_MONOTONIC ns when the daemon published it (0: not through the daemon).
     pub t_daemon_tx_ns: u64,
+    /// How many samples the publisher of this sample sent before it on this service, counted by
+    /// [`crate::FramePublisher`] itself (from 0 for each new publisher port). A reader that sees
+    /// it jump lost samples on its own input (it was stalled, or not running), whatever the
+    /// frames' sequence numbers say.
+    pub publish_index: u64,
     /// Seed of the applied perturbation.
     pub perturbation_seed: u64,
     /// ID of the applied perturbation (`C-A1`), NUL-padded; all zero when none was applied.
@@ -171,6 +179,17 @@ pub struct FrameHeader {
     pub field_count: u8,
     /// 1 if a perturbation was applied to this frame.
     pub perturbed: u8,
+    /// Bit flags: [`FLAG_KILLED`].
+    pub flags: u8,
+    /// Zero.
+    pub reserved: u8,
+    /// The campaign step that chose the perturbation, 1-based (0: none; the perturbation was
+    /// set by hand or by the configuration).
+    pub campaign_step: u16,
+    /// Frames the source knows were lost before this one and after the previous one it
+    /// published (gaps in a ROS 1 publisher's header `seq`, counted per publisher): lost
+    /// upstream of the middleware (sensor, driver, network).
+    pub lost_before: u32,
     /// Image: ROS encoding (`rgb8`, `bgr8`, `mono8`, ...), NUL-padded.
     pub encoding: [u8; ENCODING_LEN],
     /// ROS `header.frame_id`, NUL-padded.
@@ -194,6 +213,7 @@ impl Default for FrameHeader {
             t_ingress_ns: 0,
             t_daemon_rx_ns: 0,
             t_daemon_tx_ns: 0,
+            publish_index: 0,
             perturbation_seed: 0,
             perturbation_id: [0; PERTURBATION_ID_LEN],
             width: 0,
@@ -205,6 +225,10 @@ impl Default for FrameHeader {
             is_dense: 0,
             field_count: 0,
             perturbed: 0,
+            flags: 0,
+            reserved: 0,
+            campaign_step: 0,
+            lost_before: 0,
             encoding: [0; ENCODING_LEN],
             frame_id: [0; FRAME_ID_LEN],
             fields: [WireField::EMPTY; MAX_FIELDS],
@@ -673,7 +697,7 @@ mod tests {
     #[test]
     fn header_is_plain_and_stable() {
         assert_eq!(std::mem::size_of::<WireField>(), 48);
-        assert_eq!(std::mem::size_of::<FrameHeader>(), 1160);
+        assert_eq!(std::mem::size_of::<FrameHeader>(), 1176);
         assert_eq!(std::mem::align_of::<FrameHeader>(), 8);
     }
 

@@ -86,6 +86,8 @@ pub struct FramePublisher {
     publisher: Publisher<Ipc, [u8], FrameHeader>,
     notifier: Notifier<Ipc>,
     reconnects: u64,
+    /// Samples sent so far: the next one's [`FrameHeader::publish_index`].
+    sent: u64,
 }
 
 impl std::fmt::Debug for FramePublisher {
@@ -190,6 +192,7 @@ impl FramePublisher {
             publisher,
             notifier,
             reconnects: 0,
+            sent: 0,
         })
     }
 
@@ -276,6 +279,7 @@ impl FramePublisher {
         // SAFETY: see `FrameLoan::payload_mut`: the shared memory is always initialised bytes.
         let mut sample = unsafe { loan.sample.assume_init() };
         let now = monotonic_ns();
+        sample.user_header_mut().publish_index = self.sent;
         match self.hop {
             Hop::Ingress => sample.user_header_mut().t_ingress_ns = now,
             Hop::Daemon => sample.user_header_mut().t_daemon_tx_ns = now,
@@ -283,6 +287,7 @@ impl FramePublisher {
         }
         match sample.send() {
             Ok(n) => {
+                self.sent += 1;
                 // A failed wake-up only delays the frame until the next notification or the
                 // subscriber's timeout; it is not worth failing the send for.
                 let _ = self.notifier.notify();

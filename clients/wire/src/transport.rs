@@ -190,7 +190,8 @@ pub struct StreamQos {
     /// Publishers per service (the daemon restarts with a new publisher while iceoryx2 may
     /// still list the dead one: keep at least 2).
     pub max_publishers: usize,
-    /// Subscribers per service (daemon + one monitor on raw; egress + one recorder on perturbed).
+    /// Subscribers per service: on raw the daemon, a guarded egress (its fallback), a recorder
+    /// and one more (a monitor, the live view); on perturbed the egress, a recorder and two more.
     pub max_subscribers: usize,
     /// Samples a subscriber's queue holds; when full, the oldest is overwritten (safe overflow)
     /// and the receiver counts the gap in sequence numbers.
@@ -205,7 +206,7 @@ impl Default for StreamQos {
     fn default() -> Self {
         StreamQos {
             max_publishers: 2,
-            max_subscribers: 2,
+            max_subscribers: 4,
             subscriber_buffer: 2,
             subscriber_borrowed: 4,
             publisher_loans: 2,
@@ -250,6 +251,34 @@ pub mod names {
     }
     /// The daemon's control service.
     pub const CONTROL: &str = "perturb/control";
+
+    /// Checks a stream name, the one rule the daemon and the bridge share: 1 to 200 bytes of
+    /// letters, digits, `_`, `-` and `.`, in `/`-separated segments (none empty, none `.` or
+    /// `..`: a stream name is not a path). The error says what is wrong with it.
+    pub fn check_stream(name: &str) -> Result<(), String> {
+        if name.is_empty() || name.len() > 200 {
+            return Err(format!("stream name `{name}` must be 1-200 bytes long"));
+        }
+        if let Some(c) = name
+            .chars()
+            .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '/')))
+        {
+            return Err(format!(
+                "stream name `{name}` contains {c:?}: use letters, digits, `_`, `-`, `.` and `/` between segments"
+            ));
+        }
+        if name.split('/').any(|p| p == "." || p == "..") {
+            return Err(format!(
+                "stream name `{name}` contains `.` or `..` segments: a stream name is not a path"
+            ));
+        }
+        if name.split('/').any(str::is_empty) {
+            return Err(format!(
+                "stream name `{name}` must not start or end with `/` nor contain `//`"
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// CLOCK_MONOTONIC in nanoseconds: the clock every hop timestamp uses, comparable between all

@@ -19,6 +19,7 @@ pub(super) fn process_loop(
 ) {
     let name = rt.config.name.as_str();
     let mut cache = LayoutCache::default();
+    let mut step = rt.step();
     loop {
         let item = match rx.recv_timeout(TICK) {
             Ok(i) => i,
@@ -26,7 +27,8 @@ pub(super) fn process_loop(
             Err(RecvTimeoutError::Timeout) => continue,
             Err(RecvTimeoutError::Disconnected) => break,
         };
-        if let Some(change) = rt.take_pending() {
+        if let Some((change, change_step)) = rt.take_pending() {
+            step = change_step;
             match &change {
                 Some(a) => info!(
                     stream = name,
@@ -44,7 +46,7 @@ pub(super) fn process_loop(
             }
             active = change;
         }
-        process_one(rt, &mut publisher, item, &mut active, &mut cache);
+        process_one(rt, &mut publisher, item, &mut active, step, &mut cache);
     }
     debug!(stream = name, "processor stopped");
 }
@@ -94,6 +96,7 @@ fn process_one(
     publisher: &mut FramePublisher,
     item: Item,
     active: &mut Option<Active>,
+    step: u16,
     cache: &mut LayoutCache,
 ) {
     let Item { frame, t_rx } = item;
@@ -115,6 +118,10 @@ fn process_one(
         Err(e) => return invalid(rt, h.seq, &e),
     }
     let t0 = monotonic_ns();
+    // The kill switch: raw frames from the next frame on, whatever the stream is set to run.
+    let killed = rt.kill.engaged();
+    let mut held = None;
+    let active = if killed { &mut held } else { active };
     let loan = match want {
         WireModality::Camera => camera(rt, publisher, &frame, &h, active),
         WireModality::Lidar => lidar(rt, publisher, &frame, &h, active, cache),
@@ -144,6 +151,12 @@ fn process_one(
         let hd = loan.header_mut();
         hd.t_daemon_rx_ns = t_rx;
         hd.t_daemon_tx_ns = monotonic_ns();
+        hd.flags = if killed {
+            perturb_wire::header::FLAG_KILLED
+        } else {
+            0
+        };
+        hd.campaign_step = if killed { 0 } else { step };
     }
     let t_tx = loan.header().t_daemon_tx_ns;
     drop(frame); // hand the input sample back before publishing

@@ -13,43 +13,66 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tracing::{debug, error, info, warn};
 
-/// Sequence-number bookkeeping per publisher: a jump forward is a count of lost frames. It starts
-/// from where the counters file says the stream was, so a restarted daemon counts the frames its
-/// publisher sent while no daemon was there.
+/// What a jump in a publisher's `publish_index` means: frames it sent that this daemon never
+/// received.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Missed {
+    /// None.
+    Nothing,
+    /// While this daemon ran: its input queue overflowed (it was stalled or overloaded).
+    WhileRunning(u64),
+    /// While no daemon ran (the first frame after a start): killed, crashed, restarting, or not
+    /// started yet.
+    WhileDown(u64),
+}
+
+/// `publish_index` bookkeeping per publisher. It starts from where the counters file says the
+/// stream was, so a restarted daemon counts the frames its publisher sent while no daemon was
+/// there. Frames lost before the source (sensor, driver, network) are not gaps here: the source
+/// counts them itself and says so in each frame's `lost_before`.
 struct GapTracker {
     last: Option<(Origin, u64)>,
+    /// True until the first frame after the daemon started.
+    starting: bool,
 }
 
 impl GapTracker {
-    /// Starts from the publisher and sequence number recorded in `c`.
+    /// Starts from the publisher and `publish_index` recorded in `c`.
     fn resume(c: &Counters) -> Self {
         GapTracker {
-            last: c.last_origin().map(|(o, seq)| (Origin::from_raw(o), seq)),
+            last: c.last_index().map(|(o, i)| (Origin::from_raw(o), i)),
+            starting: true,
         }
     }
 
-    /// Missing sequence numbers before `seq`.
-    fn observe(&mut self, stream: &str, origin: Origin, seq: u64) -> u64 {
-        let gap = match self.last {
+    /// What was missed before the frame `index` of `origin`.
+    fn observe(&mut self, stream: &str, origin: Origin, index: u64) -> Missed {
+        let starting = std::mem::replace(&mut self.starting, false);
+        // (frames missed, whether no daemon was reading then)
+        let (gap, down) = match self.last {
             Some((o, last)) if o == origin => {
-                if seq > last {
-                    seq - last - 1
-                } else {
+                if index <= last {
                     warn!(
                         stream,
-                        last, seq, "input sequence number went backwards; counting restarts"
+                        last, index, "input publish index went backwards; counting restarts"
                     );
-                    0
                 }
+                (index.saturating_sub(last + 1), starting)
             }
+            // A publisher this daemon has not heard from numbers its samples from 0: those
+            // before `index` were sent before this daemon subscribed (or while none ran).
             Some(_) => {
-                info!(stream, seq, "a new publisher feeds the input");
-                0
+                info!(stream, index, "a new publisher feeds the input");
+                (index, true)
             }
-            None => 0,
+            None => (index, true),
         };
-        self.last = Some((origin, seq));
-        gap
+        self.last = Some((origin, index));
+        match (gap, down) {
+            (0, _) => Missed::Nothing,
+            (n, true) => Missed::WhileDown(n),
+            (n, false) => Missed::WhileRunning(n),
+        }
     }
 }
 
@@ -163,32 +186,59 @@ impl Intake<'_> {
         }
     }
 
-    /// Counts a received frame and the frames lost before it (a gap in its publisher's sequence
-    /// numbers). Magic, version and seq keep their place in every wire version, so even a frame
-    /// this build cannot read is accounted for.
+    /// Counts a received frame, the frames lost upstream that its source reports
+    /// (`lost_before`), and the frames its publisher sent that this daemon missed (a gap in
+    /// `publish_index`: while stalled, or while no daemon ran). Magic, version and seq keep their
+    /// place in every wire version, so even a frame this build cannot read is counted in.
     fn account(&mut self, frame: &Frame) {
         let c = &self.rt.stats.counters;
         let name = self.rt.config.name.as_str();
         Counters::add(&c.frames_in, 1);
         let h = frame.header();
-        if h.magic != MAGIC {
+        if h.magic != MAGIC || h.version != perturb_wire::WIRE_VERSION {
             return;
         }
-        let origin = frame.origin();
-        let gap = self.gaps.observe(name, origin, h.seq);
-        if gap > 0 {
-            let n = c.dropped_upstream.fetch_add(gap, Ordering::Relaxed);
+        if h.lost_before > 0 {
+            let n = c
+                .dropped_upstream
+                .fetch_add(u64::from(h.lost_before), Ordering::Relaxed);
             if should_log(n + 1) {
                 warn!(
                     stream = name,
                     seq = h.seq,
+                    missing = h.lost_before,
+                    "frames lost before the middleware (the source saw gaps in the sensor's sequence numbers)"
+                );
+            }
+        }
+        let origin = frame.origin();
+        match self.gaps.observe(name, origin, h.publish_index) {
+            Missed::Nothing => {}
+            Missed::WhileRunning(gap) => {
+                let n = c.dropped_input.fetch_add(gap, Ordering::Relaxed);
+                if should_log(n + 1) {
+                    warn!(
+                        stream = name,
+                        seq = h.seq,
+                        missing = gap,
+                        "frames lost on the daemon's input: it did not keep up (stalled or overloaded)"
+                    );
+                }
+            }
+            Missed::WhileDown(gap) => {
+                Counters::add(&c.dropped_down, gap);
+                info!(
+                    stream = name,
+                    seq = h.seq,
                     missing = gap,
-                    "frames lost before the daemon received them"
+                    "frames published while no daemon read the stream"
                 );
             }
         }
         c.set_origin(origin.raw());
         c.last_seq_plus_one.store(h.seq + 1, Ordering::Relaxed);
+        c.last_index_plus_one
+            .store(h.publish_index + 1, Ordering::Relaxed);
     }
 }
 

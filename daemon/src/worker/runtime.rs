@@ -3,13 +3,15 @@
 
 use crate::config::StreamConfig;
 use crate::perturbation::Active;
+use crate::safety::KillSwitch;
 use crate::state::CounterCell;
 use crate::stats::{Counters, StreamStats};
 use perturb_core::image::ImageGeometry;
 use perturb_core::perturber::Spec;
+use perturb_wire::control::LostByCause;
 use perturb_wire::control::StreamReport;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 /// The control side of a stream: what is configured, and a change waiting for the next frame.
 #[derive(Default)]
@@ -18,8 +20,13 @@ struct ControlState {
     current: Option<Spec>,
     /// The seed a `set` without a seed keeps.
     seed: u64,
-    /// A change the processing thread has not picked up yet (`Some(None)`: switch off).
-    pending: Option<Option<Active>>,
+    /// A change the processing thread has not picked up yet (`Some(None)`: switch off), with
+    /// the campaign step that made it (0: none).
+    pending: Option<(Option<Active>, u16)>,
+    /// The campaign step of `current` (0: set by hand or by the configuration).
+    step: u16,
+    /// True while a campaign drives the stream (`perturb ctl set`/`off` are refused).
+    campaign: bool,
 }
 
 /// Everything the threads of a stream and the control handler share.
@@ -33,6 +40,8 @@ pub struct StreamRuntime {
     pub(super) geometry: Mutex<Option<ImageGeometry>>,
     /// The stream's own worker threads (`threads` in its configuration); `None`: the global pool.
     pool: Option<rayon::ThreadPool>,
+    /// The daemon's kill switch (shared by every stream).
+    pub kill: Arc<KillSwitch>,
 }
 
 impl StreamRuntime {
@@ -67,11 +76,20 @@ impl StreamRuntime {
                 current: initial,
                 seed,
                 pending: None,
+                step: 0,
+                campaign: false,
             }),
             has_pending: AtomicBool::new(false),
             geometry: Mutex::new(None),
             pool,
+            kill: Arc::default(),
         })
+    }
+
+    /// The stream, under the daemon's kill switch `kill`.
+    pub fn with_kill(mut self, kill: Arc<KillSwitch>) -> Self {
+        self.kill = kill;
+        self
     }
 
     /// Runs a perturbation's frame work on the stream's worker threads: its own pool when it has
@@ -107,11 +125,20 @@ impl StreamRuntime {
 
     /// Activates `active` from the next frame on.
     pub fn set(&self, active: Active) {
+        self.set_step(Some(active), 0);
+    }
+
+    /// Runs `active` (`None`: off) from the next frame on, chosen by campaign step `step`
+    /// (1-based; 0: by hand or by the configuration).
+    pub fn set_step(&self, active: Option<Active>, step: u16) {
         let mut c = self.lock_control();
-        let spec = active.spec();
-        c.current = Some(spec);
-        c.seed = spec.seed;
-        c.pending = Some(Some(active));
+        let spec = active.as_ref().map(Active::spec);
+        c.current = spec;
+        if let Some(spec) = spec {
+            c.seed = spec.seed;
+        }
+        c.step = step;
+        c.pending = Some((active, step));
         self.has_pending.store(true, Ordering::Release);
     }
 
@@ -120,15 +147,27 @@ impl StreamRuntime {
         self.lock_control().current
     }
 
-    /// Forwards frames unchanged from the next frame on.
-    pub fn off(&self) {
-        let mut c = self.lock_control();
-        c.current = None;
-        c.pending = Some(None);
-        self.has_pending.store(true, Ordering::Release);
+    /// The campaign step of what the stream runs (0: none).
+    pub fn step(&self) -> u16 {
+        self.lock_control().step
     }
 
-    pub(super) fn take_pending(&self) -> Option<Option<Active>> {
+    /// Forwards frames unchanged from the next frame on.
+    pub fn off(&self) {
+        self.set_step(None, 0);
+    }
+
+    /// Marks the stream as driven by a campaign (or not any more).
+    pub fn set_campaign(&self, on: bool) {
+        self.lock_control().campaign = on;
+    }
+
+    /// True while a campaign drives the stream.
+    pub fn in_campaign(&self) -> bool {
+        self.lock_control().campaign
+    }
+
+    pub(super) fn take_pending(&self) -> Option<(Option<Active>, u16)> {
         if !self.has_pending.swap(false, Ordering::Acquire) {
             return None;
         }
@@ -140,11 +179,13 @@ impl StreamRuntime {
         let c = &self.stats.counters;
         let g = Counters::get;
         let current = self.lock_control().current;
-        let (dq, du, dout, dr) = (
+        let (dq, du, dout, dr, di, dd) = (
             g(&c.dropped_queue),
             g(&c.dropped_upstream),
             g(&c.dropped_output),
             g(&c.dropped_restart),
+            g(&c.dropped_input),
+            g(&c.dropped_down),
         );
         let last = g(&c.last_seq_plus_one);
         StreamReport {
@@ -158,11 +199,22 @@ impl StreamRuntime {
             seed: current.map_or(self.current_seed(), |s| s.seed),
             frames_in: g(&c.frames_in),
             frames_out: g(&c.frames_out),
-            dropped: dq + du + dout + dr,
+            dropped: dq + du + dout + dr + di + dd,
             dropped_queue: dq,
             dropped_upstream: du,
+            dropped_input: di,
+            dropped_down: dd,
             dropped_output: dout,
             dropped_restart: dr,
+            lost: LostByCause {
+                upstream: du,
+                daemon_down: dd + dr,
+                daemon_late: dq + di,
+                daemon_output: dout,
+                ..LostByCause::default()
+            },
+            killed: self.kill.engaged(),
+            step: self.lock_control().step,
             invalid: g(&c.invalid),
             perturb_failed: g(&c.perturb_failed),
             over_budget: g(&c.over_budget),

@@ -33,6 +33,27 @@ pub use value::Value;
 
 use codec::{Decoder, Reader, Writer};
 
+/// Where pose-like message types keep their position, most specific first (`Odometry`,
+/// `PoseWithCovarianceStamped`: `pose.pose.position`; `PoseStamped`: `pose.position`; `Pose`:
+/// `position`; `TransformStamped`: `transform.translation`; `PointStamped`: `point`).
+pub const POSITION_CANDIDATES: [&str; 6] = [
+    "pose.pose.position",
+    "pose.position",
+    "position",
+    "transform.translation",
+    "point",
+    "pose.pose.pose.position",
+];
+
+/// The path of the position (a field with `x` and `y`) in `codec`'s type, from
+/// [`POSITION_CANDIDATES`].
+pub fn position_path(codec: &MessageCodec) -> Option<String> {
+    POSITION_CANDIDATES
+        .iter()
+        .find(|c| codec.path(&format!("{c}.x")).is_ok() && codec.path(&format!("{c}.y")).is_ok())
+        .map(|c| c.to_string())
+}
+
 /// What can go wrong reading a schema or a message; every variant names the type, field or
 /// path concerned.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -1,0 +1,210 @@
+//! `camera_info` travels with its image: an ingress with `camera_info = "<source topic>"` reads
+//! the driver's calibration messages, and the egress of the same stream with `camera_info =
+//! "<sink topic>"` publishes each of them, unchanged (same header, same bytes, same type), right
+//! after the image with the same stamp goes out; so a consumer that pairs image and camera_info
+//! by exact stamp (image_transport's CameraSubscriber, image_proc) finds both under the names it
+//! subscribes to. A camera_info whose image never comes (the image was lost) goes out once eight
+//! newer ones wait. Both topics are on the same transport (ROS 1, or ROS 2); over ROS 1 the sink
+//! is advertised with the type, md5sum and definition the driver's publisher sent.
+
+use crate::msgs::{SmallEndpoint, SmallWriter, Wire};
+use std::collections::VecDeque;
+use std::sync::Mutex;
+
+/// The ROS 2 type of `camera_info`.
+pub const ROS2_TYPE: &str = "sensor_msgs/msg/CameraInfo";
+
+/// One received camera_info: its stamp and bytes.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Calibration {
+    /// Header stamp (seconds, nanoseconds).
+    pub stamp: (i32, u32),
+    /// The message as received.
+    pub data: Vec<u8>,
+    /// Its serialization.
+    pub wire: Wire,
+}
+
+/// The header stamp of a message that starts with a `std_msgs/Header` (ROS 1: `seq`, then
+/// `time`; CDR: the encapsulation header, then `builtin_interfaces/Time`).
+pub fn stamp_of(data: &[u8], wire: Wire) -> Option<(i32, u32)> {
+    let at = match wire {
+        Wire::Ros1 => 4,
+        Wire::Cdr => 4,
+    };
+    let b = data.get(at..at + 8)?;
+    let le = match wire {
+        Wire::Ros1 => true,
+        Wire::Cdr => data.get(1).is_some_and(|&e| e & 1 == 1),
+    };
+    let (s, n) = (b[..4].try_into().ok()?, b[4..].try_into().ok()?);
+    Some(if le {
+        (i32::from_le_bytes(s), u32::from_le_bytes(n))
+    } else {
+        (i32::from_be_bytes(s), u32::from_be_bytes(n))
+    })
+}
+
+/// The ROS 1 type a relay republishes (what the driver's publisher said).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Ros1Type {
+    /// `sensor_msgs/CameraInfo`.
+    pub name: String,
+    /// Its md5sum.
+    pub md5sum: String,
+    /// Its definition.
+    pub definition: String,
+}
+
+/// What the ingress and the egress of one stream share.
+#[derive(Debug, Default)]
+pub struct CameraInfoLink {
+    waiting: Mutex<(VecDeque<Calibration>, Option<Ros1Type>)>,
+}
+
+/// How many camera_info messages wait for their image before the oldest goes out anyway.
+const WAIT: usize = 8;
+
+impl CameraInfoLink {
+    /// The ingress side: a camera_info arrived.
+    pub fn push(&self, c: Calibration, ros1: Option<Ros1Type>) {
+        let mut w = self.waiting.lock().unwrap_or_else(|p| p.into_inner());
+        if ros1.is_some() {
+            w.1 = ros1;
+        }
+        w.0.push_back(c);
+    }
+
+    /// The egress side: the camera_info messages to publish after the image stamped `stamp`
+    /// (those stamped at or before it, and the oldest beyond [`WAIT`]), with the ROS 1 type.
+    pub fn take_for(&self, stamp: (i32, u32)) -> (Vec<Calibration>, Option<Ros1Type>) {
+        let mut w = self.waiting.lock().unwrap_or_else(|p| p.into_inner());
+        let mut out = Vec::new();
+        while let Some(c) = w.0.front() {
+            let due = (c.stamp.0, c.stamp.1) <= stamp || w.0.len() > WAIT;
+            if !due {
+                break;
+            }
+            out.extend(w.0.pop_front());
+        }
+        (out, w.1.clone())
+    }
+}
+
+/// The egress side's writer, opened once the first message says its type.
+pub struct CameraInfoSink {
+    /// The sink topic.
+    pub topic: String,
+    /// Where.
+    pub endpoint: SmallEndpoint,
+    writer: Option<Box<dyn SmallWriter>>,
+    /// Messages published.
+    pub published: u64,
+    /// Messages that could not be published.
+    pub failed: u64,
+}
+
+impl CameraInfoSink {
+    /// A sink on `topic`.
+    pub fn new(topic: String, endpoint: SmallEndpoint) -> Self {
+        CameraInfoSink {
+            topic,
+            endpoint,
+            writer: None,
+            published: 0,
+            failed: 0,
+        }
+    }
+
+    /// Publishes what `link` holds for the image stamped `stamp`.
+    pub fn after_image(&mut self, link: &CameraInfoLink, stamp: (i32, u32)) {
+        let (due, ros1) = link.take_for(stamp);
+        for c in due {
+            if self.writer.is_none() {
+                let w = match (&self.endpoint, &ros1) {
+                    (SmallEndpoint::Ros1(_), Some(t)) => self.endpoint.writer_as(
+                        &self.topic,
+                        &t.name,
+                        &t.md5sum,
+                        &t.definition,
+                        crate::dds::Qos::default(),
+                    ),
+                    (SmallEndpoint::Ros1(_), None) => {
+                        anyhow::Result::Err(anyhow::anyhow!("the source did not say its type"))
+                    }
+                    (SmallEndpoint::Dds(_), _) => self.endpoint.writer_as(
+                        &self.topic,
+                        ROS2_TYPE,
+                        "",
+                        "",
+                        crate::dds::Qos::default(),
+                    ),
+                };
+                match w {
+                    Ok(w) => self.writer = Some(w),
+                    Err(e) => {
+                        self.failed += 1;
+                        crate::stats::log_bad(
+                            &format!("camera_info -> {}", self.topic),
+                            self.failed,
+                            &e,
+                        );
+                        continue;
+                    }
+                }
+            }
+            let w = self.writer.as_mut().expect("opened above");
+            if w.wire() != c.wire {
+                self.failed += 1;
+                continue;
+            }
+            match w.write(&c.data) {
+                Ok(()) => self.published += 1,
+                Err(e) => {
+                    self.failed += 1;
+                    crate::stats::log_bad(
+                        &format!("camera_info -> {}", self.topic),
+                        self.failed,
+                        &e,
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cal(sec: i32) -> Calibration {
+        let mut data = vec![0, 1, 0, 0];
+        data.extend_from_slice(&sec.to_le_bytes());
+        data.extend_from_slice(&7u32.to_le_bytes());
+        Calibration {
+            stamp: stamp_of(&data, Wire::Cdr).unwrap(),
+            data,
+            wire: Wire::Cdr,
+        }
+    }
+
+    #[test]
+    fn calibrations_wait_for_their_image_and_never_pile_up() {
+        let l = CameraInfoLink::default();
+        assert_eq!(cal(5).stamp, (5, 7));
+        for s in [1, 2, 3] {
+            l.push(cal(s), None);
+        }
+        let (due, _) = l.take_for((2, 7));
+        assert_eq!(due.iter().map(|c| c.stamp.0).collect::<Vec<_>>(), [1, 2]);
+        for s in 4..14 {
+            l.push(cal(s), None);
+        }
+        let (due, _) = l.take_for((0, 0));
+        assert_eq!(due.len(), 3, "the oldest beyond 8 go out anyway");
+        let mut ros1 = vec![0u8; 4];
+        ros1.extend_from_slice(&9u32.to_le_bytes());
+        ros1.extend_from_slice(&3u32.to_le_bytes());
+        assert_eq!(stamp_of(&ros1, Wire::Ros1), Some((9, 3)));
+    }
+}
