@@ -324,23 +324,36 @@ fn run_guarded(
                 .next_deadline()
                 .map_or(POLL, |d| d.saturating_duration_since(now).min(POLL));
             let daemon_up = || daemon_pubs.load(Ordering::Relaxed) > 0;
-            crossbeam::select! {
-                recv(raw_rx) -> m => if let Ok(h) = m {
+            let on_raw =
+                |h: Held, guard: &mut Guard, decisions: &mut Vec<Decision>, out: &mut Out| {
                     out.rep.received += 1;
                     if h.payload().kind() != kind {
                         out.rep.bad += 1;
-                        log_bad(&out.name, out.rep.bad, &"frame of the wrong kind for this topic");
-                    } else {
-                        let lost = u64::from(h.lost_before());
-                        if lost > 0 {
-                            out.rep.lost_by_cause.upstream += lost;
-                            out.gap(h.meta().seq, "upstream", lost);
-                        }
-                        guard.on_raw(h, Instant::now(), daemon_up(), kill.engaged(), &mut decisions);
+                        log_bad(
+                            &out.name,
+                            out.rep.bad,
+                            &"frame of the wrong kind for this topic",
+                        );
+                        return;
                     }
+                    let lost = u64::from(h.lost_before());
+                    if lost > 0 {
+                        out.rep.lost_by_cause.upstream += lost;
+                        out.gap(h.meta().seq, "upstream", lost);
+                    }
+                    guard.on_raw(h, Instant::now(), daemon_up(), kill.engaged(), decisions);
+                };
+            crossbeam::select! {
+                recv(raw_rx) -> m => if let Ok(h) = m {
+                    on_raw(h, &mut guard, &mut decisions, out);
                 },
                 recv(pert_rx) -> m => if let Ok(h) = m {
                     last_perturbed = Instant::now();
+                    // Its raw frame may still wait in the raw reader's queue: take the raw
+                    // frames first, so the perturbed one finds its own.
+                    while let Ok(r) = raw_rx.try_recv() {
+                        on_raw(r, &mut guard, &mut decisions, out);
+                    }
                     guard.on_perturbed(h, &mut decisions);
                 },
                 default(wait) => {},
@@ -400,6 +413,13 @@ fn run_guarded(
         }
         out.rep.fallback_raw = guard.fallback;
         out.rep.late_discarded = guard.late_discarded;
+        if guard.stale_raw > 0 {
+            out.rep.lost_by_cause.egress += guard.stale_raw;
+            out.rep.notes.push(format!(
+                "{} raw frame(s) came after a newer frame had gone out and were not published (the ADS gets frames in order)",
+                guard.stale_raw
+            ));
+        }
         Ok(())
     })
 }

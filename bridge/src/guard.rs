@@ -151,6 +151,11 @@ pub struct Guard {
     pub fallback: FallbackCounts,
     /// Perturbed frames that came after their raw frame had gone out.
     pub late_discarded: u64,
+    /// Raw frames that came after a newer frame had gone out (the ADS gets frames in order):
+    /// not published, lost at the egress.
+    pub stale_raw: u64,
+    /// The last sequence number published.
+    last: Option<u64>,
 }
 
 /// How many recent sequence numbers the guard remembers.
@@ -171,6 +176,8 @@ impl Guard {
             last_raw_ns: None,
             fallback: FallbackCounts::default(),
             late_discarded: 0,
+            stale_raw: 0,
+            last: None,
         }
     }
 
@@ -205,6 +212,7 @@ impl Guard {
             self.recent.pop_front();
         }
         self.recent.push_back(seq);
+        self.last = Some(seq);
     }
 
     fn late(&mut self, p: Pending, why: Fallback, out: &mut Vec<Decision>) {
@@ -239,6 +247,14 @@ impl Guard {
             self.intervals.push_back(t - last);
         }
         let seq = frame.meta().seq;
+        if self.recent.contains(&seq) {
+            // Its perturbed frame came first and went out.
+            return;
+        }
+        if self.last.is_some_and(|l| seq < l) {
+            self.stale_raw += 1;
+            return;
+        }
         if killed {
             // Raw at once, as the kill switch says, after what was waiting (in order).
             self.flush(Fallback::Killed, out);
@@ -481,6 +497,19 @@ mod tests {
         g.expire(t + Duration::from_secs(1), true, &mut out);
         assert_eq!(seqs(&out), [(1, "dropped"), (2, "dropped")]);
         assert_eq!(g.fallback.total(), 0);
+    }
+
+    #[test]
+    fn a_raw_frame_after_its_perturbed_one_or_after_a_newer_one_is_not_published() {
+        let mut g = guard(OnLate::Raw);
+        let t = Instant::now();
+        let mut out = Vec::new();
+        g.on_perturbed(frame(4), &mut out);
+        g.on_raw(frame(4), t, true, false, &mut out);
+        g.on_raw(frame(3), t, true, false, &mut out);
+        g.expire(t + Duration::from_secs(1), true, &mut out);
+        assert_eq!(seqs(&out), [(4, "perturbed")]);
+        assert_eq!(g.stale_raw, 1);
     }
 
     #[test]

@@ -5,7 +5,9 @@ PyPI package `cyclonedds` (its wheel bundles libddsc), with the ROS 2 naming and
 volatile) unless --reliable.
 
   dds_peer.py listen  --topic /cam --type image --count N [--timeout S] [--interface lo]
-      prints one JSON line per received sample: stamp, frame_id, geometry, sha256 of data
+      prints one JSON line per received sample: stamp, frame_id, geometry, sha256 of data,
+      CLOCK_MONOTONIC arrival (t_arrival_ns); types image, compressed_image, cloud, string,
+      bool, camera_info
   dds_peer.py publish --topic /cam --type image|compressed_image|cloud --count N
                       [--width W --height H] [--points P] [--lie]
       waits for a matched reader, publishes N samples (stamp sec=1000+i, nanosec=i*1000+7,
@@ -95,7 +97,46 @@ class PointCloud2(IdlStruct, typename="sensor_msgs::msg::dds_::PointCloud2_"):
     is_dense: bool
 
 
-TYPES = {"image": Image, "compressed_image": CompressedImage, "cloud": PointCloud2}
+@dataclass
+@annotate.final
+class String(IdlStruct, typename="std_msgs::msg::dds_::String_"):
+    data: str
+
+
+@dataclass
+@annotate.final
+class Bool(IdlStruct, typename="std_msgs::msg::dds_::Bool_"):
+    data: bool
+
+
+@dataclass
+@annotate.final
+class RegionOfInterest(IdlStruct, typename="sensor_msgs::msg::dds_::RegionOfInterest_"):
+    x_offset: types.uint32
+    y_offset: types.uint32
+    height: types.uint32
+    width: types.uint32
+    do_rectify: bool
+
+
+@dataclass
+@annotate.final
+class CameraInfo(IdlStruct, typename="sensor_msgs::msg::dds_::CameraInfo_"):
+    header: Header
+    height: types.uint32
+    width: types.uint32
+    distortion_model: str
+    d: types.sequence[types.float64]
+    k: types.array[types.float64, 9]
+    r: types.array[types.float64, 9]
+    p: types.array[types.float64, 12]
+    binning_x: types.uint32
+    binning_y: types.uint32
+    roi: RegionOfInterest
+
+
+TYPES = {"image": Image, "compressed_image": CompressedImage, "cloud": PointCloud2,
+         "string": String, "bool": Bool, "camera_info": CameraInfo}
 
 
 def participant(args):
@@ -137,8 +178,19 @@ def pattern(i, n):
 
 
 def describe(s, kind):
+    t = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
+    if kind == "string":
+        return {"data": s.data, "t_arrival_ns": t}
+    if kind == "bool":
+        return {"data": s.data, "t_arrival_ns": t}
+    if kind == "camera_info":
+        return {"sec": s.header.stamp.sec, "nanosec": s.header.stamp.nanosec,
+                "frame_id": s.header.frame_id, "width": s.width, "height": s.height,
+                "distortion_model": s.distortion_model, "d": list(s.d), "k": list(s.k),
+                "t_arrival_ns": t}
     data = bytes(s.data)
     out = {
+        "t_arrival_ns": t,
         "sec": s.header.stamp.sec,
         "nanosec": s.header.stamp.nanosec,
         "frame_id": s.header.frame_id,
@@ -193,6 +245,16 @@ def make(args, i):
         if args.lie and i % 2 == 1:
             data = data[: len(data) // 2]  # a truncated PNG
         return CompressedImage(header=header, format="png", data=list(data))
+    if args.type == "string":
+        return String(data=f"message {i}")
+    if args.type == "bool":
+        return Bool(data=bool(args.value))
+    if args.type == "camera_info":
+        return CameraInfo(header=header, height=args.height, width=args.width,
+                          distortion_model="plumb_bob", d=[0.1 * i, -0.2, 0.0, 0.0, 0.01],
+                          k=[500.0, 0, 320, 0, 500.0, 240, 0, 0, 1], r=[1.0, 0, 0, 0, 1, 0, 0, 0, 1],
+                          p=[500.0, 0, 320, 0, 0, 500.0, 240, 0, 0, 0, 1, 0], binning_x=0,
+                          binning_y=0, roi=RegionOfInterest(0, 0, 0, 0, False))
     if args.type == "cloud":
         fields = [PointField("x", 0, 7, 1), PointField("y", 4, 7, 1), PointField("z", 8, 7, 1),
                   PointField("intensity", 12, 7, 1)]
@@ -243,6 +305,7 @@ def main():
     ap.add_argument("--rate", type=float, default=10.0)
     ap.add_argument("--settle", type=float, default=0.5)
     ap.add_argument("--lie", action="store_true", help="make every odd sample malformed")
+    ap.add_argument("--value", type=int, default=1, help="bool: the value published")
     ap.add_argument("--interface", action="append", default=[],
                     help="network interface (name) DDS may use, e.g. lo; repeatable")
     args = ap.parse_args()

@@ -641,3 +641,90 @@ pub fn roscpp_publisher() -> Option<PathBuf> {
     eprintln!("SKIP: {ROSCPP_PACKAGES} are missing: {why}");
     None
 }
+
+/// The independent DDS peer (`bridge/tests/dds_peer.py`, Cyclone DDS from the PyPI package
+/// `cyclonedds`) with `args`, on loopback, its stdout piped.
+pub fn dds_peer(args: &[&str]) -> Child {
+    Command::new("python3")
+        .arg(workspace().join("bridge/tests/dds_peer.py"))
+        .args(args)
+        .args(["--interface", "lo"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("starting the DDS peer")
+}
+
+/// Reads a peer's JSON lines on a thread of its own until its stdout closes (kill the peer to
+/// end it); `{"ready": true}` lines are left out. For subscribers that print while the test
+/// goes on: `collect_lines(ros1_ready(&mut sub))`, or `collect_lines(stdout_of(&mut peer))`.
+pub fn collect_lines(
+    mut r: impl BufRead + Send + 'static,
+) -> std::thread::JoinHandle<Vec<serde_json::Value>> {
+    std::thread::spawn(move || {
+        let mut v = Vec::new();
+        let mut line = String::new();
+        while r.read_line(&mut line).is_ok_and(|n| n > 0) {
+            if let Ok(j) = serde_json::from_str::<serde_json::Value>(&line)
+                && j.get("ready").is_none()
+            {
+                v.push(j);
+            }
+            line.clear();
+        }
+        v
+    })
+}
+
+/// A child's piped stdout, buffered.
+pub fn stdout_of(child: &mut Child) -> BufReader<std::process::ChildStdout> {
+    BufReader::new(child.stdout.take().expect("piped stdout"))
+}
+
+/// Kills the children (the peers of a test) and waits for them.
+pub fn kill_all(children: &mut [Child]) {
+    for c in children.iter_mut() {
+        let _ = c.kill();
+    }
+    for c in children.iter_mut() {
+        let _ = c.wait();
+    }
+}
+
+/// Starts `perturb-bridge --config CFG` in the namespace (and with the ROS 1 environment of
+/// `master`), its log in `ns.dir/LOG`.
+pub fn start_bridge(ns: &Namespace, master: Option<&Ros1Master>, cfg: &Path, log: &str) -> Child {
+    let log = std::fs::File::create(ns.dir.join(log)).expect("bridge log");
+    let mut c = ns.command(exe("perturb-bridge"));
+    if let Some(m) = master {
+        m.env(&mut c);
+    }
+    c.arg("--config")
+        .arg(cfg)
+        .stdout(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .expect("starting perturb-bridge")
+}
+
+/// Sends a signal to a process (SIGSTOP, SIGCONT, ...).
+// libc's kill.
+#[allow(unsafe_code)]
+pub fn signal(pid: u32, sig: libc::c_int) {
+    // SAFETY: signalling a child process this test started.
+    unsafe {
+        libc::kill(pid as i32, sig);
+    }
+}
+
+/// The largest gap between consecutive `t_arrival_ns` of `lines`, in ms.
+pub fn largest_gap_ms(lines: &[serde_json::Value]) -> f64 {
+    let mut t: Vec<u64> = lines
+        .iter()
+        .filter_map(|g| g["t_arrival_ns"].as_u64())
+        .collect();
+    t.sort_unstable();
+    t.windows(2)
+        .map(|w| (w[1] - w[0]) as f64 / 1e6)
+        .fold(0.0, f64::max)
+}

@@ -507,7 +507,13 @@ fn a_bad_configuration_is_refused_naming_the_key() {
         "{err}"
     );
 
-    for shipped in ["minimal.toml", "vehicle.toml", "e2e.toml", "load.toml"] {
+    for shipped in [
+        "minimal.toml",
+        "vehicle.toml",
+        "e2e.toml",
+        "load.toml",
+        "autoware-mini-perturbd.toml",
+    ] {
         let p = perturb_tests::workspace().join("config").join(shipped);
         let o = ns
             .command(exe("perturbd"))

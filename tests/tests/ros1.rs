@@ -19,28 +19,15 @@ use perturb_bridge::topic::TopicReader;
 use perturb_core::formats::ros::{Header, ImageMsg};
 use perturb_core::formats::ros1;
 use perturb_tests::{
-    Namespace, Ros1Master, events, exe, have_ros1, have_rosbags, read_bag, ros_python, ros1_lines,
-    ros1_peer, ros1_ready,
+    Namespace, Ros1Master, events, exe, have_ros1, have_rosbags, largest_gap_ms, read_bag,
+    ros_python, ros1_lines, ros1_peer, ros1_ready, start_bridge,
 };
 use serde_json::Value;
-use std::path::Path;
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 fn interrupt(c: &mut Child) -> bool {
     perturb_wire::process::interrupt(c, Duration::from_secs(15)).is_some_and(|s| s.success())
-}
-
-fn start_bridge(ns: &Namespace, master: &Ros1Master, cfg: &Path, log: &str) -> Child {
-    let log = std::fs::File::create(ns.dir.join(log)).unwrap();
-    let mut c = ns.command(exe("perturb-bridge"));
-    master.env(&mut c);
-    c.arg("--config")
-        .arg(cfg)
-        .stdout(Stdio::null())
-        .stderr(log)
-        .spawn()
-        .unwrap()
 }
 
 fn log_of(ns: &Namespace, name: &str) -> String {
@@ -110,7 +97,7 @@ fn ros1_sensors_through_perturbd_to_rospy_exact_headers_and_a_bag1_recording() {
     )
     .unwrap();
     let mut daemon = ns.start_daemon(&daemon_cfg);
-    let mut bridge = start_bridge(&ns, &master, &bridge_cfg, "bridge.log");
+    let mut bridge = start_bridge(&ns, Some(&master), &bridge_cfg, "bridge.log");
     // The bridge registers its four topics.
     assert!(
         wait_for(Duration::from_secs(20), || {
@@ -397,7 +384,7 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
     )
     .unwrap();
     // The bridge starts first and waits for its master.
-    let mut bridge = start_bridge(&ns, &master, &cfg, "bridge.log");
+    let mut bridge = start_bridge(&ns, Some(&master), &cfg, "bridge.log");
     assert!(wait_for(Duration::from_secs(15), || log_of(
         &ns,
         "bridge.log"
@@ -520,18 +507,6 @@ fn ros1_bridge_waits_for_its_master_and_registers_again_after_a_restart() {
     assert_eq!(egress["forwarded"], 10, "{egress}");
 }
 
-/// The largest gap between two consecutive arrivals (`t_arrival_ns` of a rospy subscriber), ms.
-fn largest_gap_ms(got: &[Value]) -> f64 {
-    let mut t: Vec<u64> = got
-        .iter()
-        .filter_map(|g| g["t_arrival_ns"].as_u64())
-        .collect();
-    t.sort_unstable();
-    t.windows(2)
-        .map(|w| (w[1] - w[0]) as f64 / 1e6)
-        .fold(0.0, f64::max)
-}
-
 /// A ROS 1 master restart mid-stream, with rospy and roscpp sensor publishers that (as ROS 1
 /// nodes do) never register with the new master: the bridge registers again, keeps its working
 /// links to both publishers and to its subscribers, and picks up a publisher that appears after
@@ -568,7 +543,7 @@ fn ros1_links_outlive_a_master_restart_with_rospy_and_roscpp_publishers() {
     )
     .unwrap();
     let mut daemon = ns.start_daemon(&daemon_cfg);
-    let mut bridge = start_bridge(&ns, &master, &bridge_cfg, "bridge.log");
+    let mut bridge = start_bridge(&ns, Some(&master), &bridge_cfg, "bridge.log");
     assert!(
         wait_for(Duration::from_secs(20), || rostopic_list(&master, "-p")
             .contains("/relayed/cpp")),
@@ -834,7 +809,7 @@ fn ros1_rosbag_record_bag_replays_through_perturbd_with_clock() {
         ],
     );
     let clock_r = ros1_ready(&mut clock);
-    let mut bridge = start_bridge(&ns, &master, &cfg, "bridge.log");
+    let mut bridge = start_bridge(&ns, Some(&master), &cfg, "bridge.log");
     let ticks = ros1_lines(clock_r, &mut clock);
     let st = bridge.wait().unwrap();
     assert!(st.success(), "{}", log_of(&ns, "bridge.log"));

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Independent ROS 1 peers for the tests: Debian's rospy (run with /usr/bin/python3).
 
-  ros1_peer.py pub --topic T --type image|cloud|string --count N [--rate HZ] [--size WxH]
+  ros1_peer.py pub --topic T --type image|cloud|string|bool|pose|camera_info --count N [--rate HZ] [--size WxH]
                    [--points N] [--frame-id F] [--wait-subscribers K] [--stamp-base S]
       publishes N messages with distinct headers once K subscribers are connected; prints one
       JSON line per message (the header as published, rospy's seq, the data's sha256)
@@ -19,12 +19,14 @@ import sys
 import time
 
 import rospy
+from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Image, PointCloud2, PointField
-from std_msgs.msg import String
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
+from std_msgs.msg import Bool, String
 
 HASH = True
-TYPES = {"image": Image, "cloud": PointCloud2, "string": String, "clock": Clock}
+TYPES = {"image": Image, "cloud": PointCloud2, "string": String, "clock": Clock, "bool": Bool,
+         "pose": PoseStamped, "camera_info": CameraInfo}
 
 
 def out(d):
@@ -36,8 +38,17 @@ def describe(m):
     if isinstance(m, Clock):
         d["clock_ns"] = m.clock.to_nsec()
         return d
-    if isinstance(m, String):
+    if isinstance(m, (String, Bool)):
         d["data"] = m.data
+        return d
+    if isinstance(m, PoseStamped):
+        d.update(x=m.pose.position.x, y=m.pose.position.y, sec=m.header.stamp.secs,
+                 nsec=m.header.stamp.nsecs)
+        return d
+    if isinstance(m, CameraInfo):
+        d.update(seq=m.header.seq, sec=m.header.stamp.secs, nsec=m.header.stamp.nsecs,
+                 frame_id=m.header.frame_id, width=m.width, height=m.height,
+                 distortion_model=m.distortion_model, D=list(m.D), K=list(m.K))
         return d
     d.update(seq=m.header.seq, sec=m.header.stamp.secs, nsec=m.header.stamp.nsecs,
              frame_id=m.header.frame_id, width=m.width, height=m.height, len=len(m.data))
@@ -54,6 +65,26 @@ def describe(m):
 def make(kind, k, a):
     if kind == "string":
         return String(data=f"message {k}")
+    if kind == "bool":
+        # false before message --switch-at, true from it on
+        return Bool(data=k >= a.switch_at)
+    if kind == "pose":
+        x0, y0, dx, dy = (float(v) for v in a.path.split(","))
+        m = PoseStamped()
+        m.header.frame_id = "map"
+        m.header.stamp = rospy.Time(a.stamp_base + k, 1000 * k + 7)
+        m.pose.position.x, m.pose.position.y = x0 + k * dx, y0 + k * dy
+        m.pose.orientation.w = 1.0
+        return m
+    if kind == "camera_info":
+        m = CameraInfo(height=48, width=64, distortion_model="plumb_bob")
+        m.D = [0.01 * k, -0.2, 0.0, 0.0, 0.01]
+        m.K = [500.0, 0, 32, 0, 500.0, 24, 0, 0, 1]
+        m.R = [1.0, 0, 0, 0, 1, 0, 0, 0, 1]
+        m.P = [500.0, 0, 32, 0, 0, 500.0, 24, 0, 0, 0, 1, 0]
+        m.header.frame_id = a.frame_id
+        m.header.stamp = rospy.Time(a.stamp_base + k, 1000 * k + 7)
+        return m
     if kind == "image":
         w, h = (int(x) for x in a.size.split("x"))
         m = Image(height=h, width=w, encoding="rgb8", is_bigendian=0, step=w * 3)
@@ -89,9 +120,11 @@ def pub(a):
             if delay > 0:
                 time.sleep(delay)
         m = make(a.type, k, a)
+        t_pub = time.clock_gettime_ns(time.CLOCK_MONOTONIC)
         p.publish(m)
         d = describe(m)
         d.pop("t_arrival_ns", None)
+        d["t_pub_ns"] = t_pub
         out(d)
     time.sleep(a.linger)
 
@@ -127,6 +160,8 @@ def main():
     ap.add_argument("--linger", type=float, default=0.5)
     ap.add_argument("--name", default="x")
     ap.add_argument("--no-hash", action="store_true", help="skip the sha256 (latency runs)")
+    ap.add_argument("--switch-at", type=int, default=0, help="bool: true from this message on")
+    ap.add_argument("--path", default="0,0,1,0", help="pose: x0,y0,dx,dy per message")
     a = ap.parse_args()
     global HASH
     HASH = not a.no_hash
