@@ -413,13 +413,7 @@ fn run_guarded(
         }
         out.rep.fallback_raw = guard.fallback;
         out.rep.late_discarded = guard.late_discarded;
-        if guard.stale_raw > 0 {
-            out.rep.lost_by_cause.egress += guard.stale_raw;
-            out.rep.notes.push(format!(
-                "{} raw frame(s) came after a newer frame had gone out and were not published (the ADS gets frames in order)",
-                guard.stale_raw
-            ));
-        }
+
         Ok(())
     })
 }

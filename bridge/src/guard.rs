@@ -131,9 +131,33 @@ pub enum Decision {
     Dropped(u64, Fallback),
 }
 
+/// What identifies a frame on both sides of the daemon: its sequence number and header stamp
+/// (two publishers on one topic, or a driver that restarted, number their frames from the same
+/// values; their stamps differ).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameKey {
+    seq: u64,
+    sec: i32,
+    nanosec: u32,
+}
+
+impl FrameKey {
+    /// The key of a held frame.
+    pub fn of(f: &Held) -> Self {
+        let h = f.payload();
+        let h = h.header();
+        FrameKey {
+            seq: f.meta().seq,
+            sec: h.stamp_sec,
+            nanosec: h.stamp_nanosec,
+        }
+    }
+}
+
 /// A raw frame waiting for its perturbed version.
 struct Pending {
     frame: Held,
+    key: FrameKey,
     deadline: Instant,
 }
 
@@ -142,8 +166,8 @@ struct Pending {
 pub struct Guard {
     settings: GuardSettings,
     pending: VecDeque<Pending>,
-    /// Sequence numbers published lately (a perturbed frame among them came too late).
-    recent: VecDeque<u64>,
+    /// Frames published lately (a perturbed frame among them came too late).
+    recent: VecDeque<FrameKey>,
     /// Recent raw inter-arrival intervals, ns.
     intervals: VecDeque<u64>,
     last_raw_ns: Option<u64>,
@@ -151,11 +175,6 @@ pub struct Guard {
     pub fallback: FallbackCounts,
     /// Perturbed frames that came after their raw frame had gone out.
     pub late_discarded: u64,
-    /// Raw frames that came after a newer frame had gone out (the ADS gets frames in order):
-    /// not published, lost at the egress.
-    pub stale_raw: u64,
-    /// The last sequence number published.
-    last: Option<u64>,
 }
 
 /// How many recent sequence numbers the guard remembers.
@@ -176,8 +195,6 @@ impl Guard {
             last_raw_ns: None,
             fallback: FallbackCounts::default(),
             late_discarded: 0,
-            stale_raw: 0,
-            last: None,
         }
     }
 
@@ -207,17 +224,16 @@ impl Guard {
         self.pending.len()
     }
 
-    fn published(&mut self, seq: u64) {
+    fn published(&mut self, key: FrameKey) {
         if self.recent.len() == RECENT {
             self.recent.pop_front();
         }
-        self.recent.push_back(seq);
-        self.last = Some(seq);
+        self.recent.push_back(key);
     }
 
     fn late(&mut self, p: Pending, why: Fallback, out: &mut Vec<Decision>) {
         let seq = p.frame.meta().seq;
-        self.published(seq);
+        self.published(p.key);
         match self.settings.on_late {
             OnLate::Raw => {
                 self.fallback.add(why);
@@ -246,25 +262,22 @@ impl Guard {
             }
             self.intervals.push_back(t - last);
         }
-        let seq = frame.meta().seq;
-        if self.recent.contains(&seq) {
+        let key = FrameKey::of(&frame);
+        if self.recent.contains(&key) {
             // Its perturbed frame came first and went out.
-            return;
-        }
-        if self.last.is_some_and(|l| seq < l) {
-            self.stale_raw += 1;
             return;
         }
         if killed {
             // Raw at once, as the kill switch says, after what was waiting (in order).
             self.flush(Fallback::Killed, out);
-            self.published(seq);
+            self.published(key);
             self.fallback.add(Fallback::Killed);
             out.push(Decision::Raw(frame, Fallback::Killed));
             return;
         }
         let p = Pending {
             frame,
+            key,
             deadline: now + self.deadline(),
         };
         if !daemon_up {
@@ -277,29 +290,23 @@ impl Guard {
 
     /// A perturbed frame arrived.
     pub fn on_perturbed(&mut self, frame: Held, out: &mut Vec<Decision>) {
-        let seq = frame.meta().seq;
-        if let Some(i) = self.pending.iter().position(|p| p.frame.meta().seq == seq) {
+        let key = FrameKey::of(&frame);
+        if let Some(i) = self.pending.iter().position(|p| p.key == key) {
             // Older raw frames whose perturbed versions never came (the daemon dropped them):
             // they go out first, in order.
             for p in self.pending.drain(..i).collect::<Vec<_>>() {
                 self.late(p, Fallback::Late, out);
             }
             self.pending.pop_front();
-            self.published(seq);
+            self.published(key);
             out.push(Decision::Perturbed(frame));
-        } else if self.recent.contains(&seq) {
+        } else if self.recent.contains(&key) {
             self.late_discarded += 1;
         } else {
             // Its raw frame was never seen here (lost on this side, or a bus without a raw
-            // side): it goes out, after the older raw frames.
-            while let Some(p) = self.pending.front() {
-                if p.frame.meta().seq >= seq {
-                    break;
-                }
-                let p = self.pending.pop_front().expect("front exists");
-                self.late(p, Fallback::Late, out);
-            }
-            self.published(seq);
+            // side): it goes out, after the raw frames waiting (older).
+            self.flush(Fallback::Late, out);
+            self.published(key);
             out.push(Decision::Perturbed(frame));
         }
     }
@@ -376,12 +383,16 @@ mod tests {
     use perturb_core::synthetic::street_image;
 
     fn frame(seq: u64) -> Held {
+        frame_stamped(seq, seq as i32)
+    }
+
+    fn frame_stamped(seq: u64, sec: i32) -> Held {
         let meta = FrameMeta {
             seq,
             ..Default::default()
         };
         let p = OwnedPayload::Image {
-            sec: seq as i32,
+            sec,
             nanosec: 0,
             frame_id: "cam".into(),
             image: street_image(8, 4, 0),
@@ -500,16 +511,18 @@ mod tests {
     }
 
     #[test]
-    fn a_raw_frame_after_its_perturbed_one_or_after_a_newer_one_is_not_published() {
+    fn a_raw_frame_after_its_perturbed_one_is_not_published_again_but_a_restarted_publisher_is() {
         let mut g = guard(OnLate::Raw);
         let t = Instant::now();
         let mut out = Vec::new();
         g.on_perturbed(frame(4), &mut out);
         g.on_raw(frame(4), t, true, false, &mut out);
-        g.on_raw(frame(3), t, true, false, &mut out);
         g.expire(t + Duration::from_secs(1), true, &mut out);
         assert_eq!(seqs(&out), [(4, "perturbed")]);
-        assert_eq!(g.stale_raw, 1);
+        // Another publisher (or the driver restarted): the same numbers, other stamps.
+        g.on_raw(frame_stamped(4, 99), t, true, false, &mut out);
+        g.on_perturbed(frame_stamped(4, 99), &mut out);
+        assert_eq!(seqs(&out), [(4, "perturbed"), (4, "perturbed")]);
     }
 
     #[test]

@@ -66,17 +66,20 @@ impl TransportOptions {
     }
 
     /// A namespace private to `tag` and this process (for tests): prefix `pt_<tag>_<pid>_` and a
-    /// root under the system temp directory.
+    /// root under the system temp directory. The tag is cut to 12 characters: iceoryx2's event
+    /// listeners are Unix sockets under the root, named with the prefix, and a socket path may
+    /// not exceed 108 bytes (a long tag and a 7-digit process id made the daemon's control
+    /// listener fail to open).
     pub fn isolated(tag: &str) -> Self {
         let clean: String = tag
             .chars()
             .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
-            .take(24)
+            .take(12)
             .collect();
         let pid = std::process::id();
         TransportOptions {
             prefix: Some(format!("pt_{clean}_{pid}_")),
-            root: Some(std::env::temp_dir().join(format!("perturb-iox2-{clean}-{pid}"))),
+            root: Some(std::env::temp_dir().join(format!("pio-{clean}-{pid}"))),
             iceoryx2_config: None,
         }
     }
