@@ -396,6 +396,17 @@ impl Run {
     }
 }
 
+/// The time of the first pose within `tol` of the route's end (where a run trimmed to the route
+/// ends), or the last pose's time.
+pub fn goal_time(run: &Run, tol: f64) -> f64 {
+    let times = run.pose_times();
+    times
+        .iter()
+        .copied()
+        .find(|t| (run.s_of_t)(*t) >= route_length() - tol)
+        .unwrap_or(*times.last().unwrap())
+}
+
 /// A fresh scratch directory.
 pub fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("perturb-study-test-{}-{name}", std::process::id()));
