@@ -103,16 +103,17 @@ pub struct RunTrack {
 /// over the part before it first gets `until_m` metres along the route (and before its
 /// failure); None where there is no sample.
 pub fn window_until(tr: &RunTrack, until_m: f64, unit: JitterUnit) -> WindowMetrics {
-    let stop = tr
-        .reached
-        .iter()
-        .position(|&s| s > until_m)
-        .map_or(tr.end, |i| tr.t[i]);
-    let stop = stop.min(tr.end);
+    // The last pose not beyond `until_m` ends the part.
+    let stop = match tr.reached.iter().position(|&s| s > until_m) {
+        Some(0) => 0.0,
+        Some(i) => tr.t[i - 1],
+        None => tr.end,
+    }
+    .min(tr.end);
     let e: Vec<f64> =
         tr.t.iter()
             .zip(&tr.cte)
-            .filter(|(t, _)| **t < stop || (**t <= stop && stop >= tr.end))
+            .filter(|(t, _)| **t <= stop)
             .map(|(_, c)| c.abs())
             .collect();
     let steer: Vec<(f64, f64)> = tr

@@ -6,8 +6,8 @@
 //! every `bin` metres of arc length each drive's signed lateral offset is interpolated where the
 //! drive passes that arc length, and the region there is the band from the smallest to the
 //! largest of those offsets (the band the nominal trajectories span). Between grid points the
-//! band's edges are linear; an arc length no nominal drive reached takes the band of the nearest
-//! one that did. The CTE of a pose is 0 inside the band and its signed distance to the nearer
+//! band's edges are linear; an arc length not every nominal drive passed (before the latest
+//! start, after the earliest end) takes the band of the nearest one they all passed. The CTE of a pose is 0 inside the band and its signed distance to the nearer
 //! edge outside (positive to the left of the direction of travel).
 //!
 //! Without a route the nominal drives give one: their centre line (the mean offset of the drives,
@@ -21,9 +21,8 @@ use serde::Serialize;
 /// A band around a route, per arc length.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ReferenceRegion {
-    /// Grid spacing, metres.
+    /// Grid spacing, metres: grid point k lies at arc length `k * bin_m`.
     pub bin_m: f64,
-    /// Arc length of grid point k: `k * bin_m`.
     /// Lower (right) edge of the band at each grid point, metres (signed, left positive).
     pub lo: Vec<f64>,
     /// Upper (left) edge.
@@ -104,10 +103,12 @@ impl ReferenceRegion {
         if !any || drives_at.iter().all(|&d| d == 0) {
             return None;
         }
-        // Grid points no drive reached: the nearest reached one's band.
-        let reached: Vec<usize> = (0..n).filter(|&k| drives_at[k] > 0).collect();
+        // Grid points not every drive passed (before the latest start, after the earliest
+        // end): the band of the nearest one they all passed.
+        let full = *drives_at.iter().max().expect("a grid point");
+        let reached: Vec<usize> = (0..n).filter(|&k| drives_at[k] == full).collect();
         for k in 0..n {
-            if drives_at[k] == 0 {
+            if drives_at[k] < full {
                 let j = reached
                     .iter()
                     .copied()
