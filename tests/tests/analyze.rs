@@ -80,6 +80,50 @@ fn a_demo_recording_is_split_into_its_perturbation_segments() {
         );
     }
     assert!(run["failure"].is_null());
+    // Without a route or pose nothing says whether it failed: unjudged, never ok.
+    assert_eq!(run["outcome"], "unjudged", "{run}");
+    assert!(
+        run["unjudged_reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("pose")),
+        "{run}"
+    );
+    assert_eq!(v["summary"]["unjudged"], 1);
+    assert_eq!(v["summary"]["ok"], 0);
+
+    // The recording's MCAP file twice, side by side in a folder: two runs, each as long as
+    // the recording, never one merged run.
+    let mcap = std::fs::read_dir(&recording)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("the recording's MCAP file");
+    let pair = out.join("pair");
+    std::fs::create_dir_all(&pair).unwrap();
+    for name in ["first.mcap", "second.mcap"] {
+        std::fs::copy(&mcap, pair.join(name)).unwrap();
+    }
+    let o = Command::new(exe("perturb"))
+        .arg("analyze")
+        .arg(&pair)
+        .args(["--event-stream", camera, "--min-segment", "0", "--json"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let pv: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let pair_runs = pv["runs"].as_array().unwrap();
+    let names: Vec<&str> = pair_runs
+        .iter()
+        .map(|r| r["run"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["first", "second"], "{pv}");
+    for r in pair_runs {
+        assert!(
+            (r["duration_s"].as_f64().unwrap() - run["duration_s"].as_f64().unwrap()).abs() < 1e-9,
+            "{r} vs {run}"
+        );
+    }
 
     // The same segments from the event times rosbags reads.
     if !have_rosbags() {

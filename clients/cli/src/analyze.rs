@@ -4,8 +4,8 @@
 use anyhow::{Context, Result, bail};
 use perturb_study::Format;
 use perturb_study::analyze::{
-    Aggregate, AnalyzeConfig, JitterUnit, ObjectsConfig, ObjectsFrame, TopicField,
-    render_conditions, render_perturbations, render_runs, render_segments,
+    Aggregate, AnalyzeConfig, CteTo, JitterUnit, ObjectsConfig, ObjectsFrame, TopicField,
+    render_conditions, render_perturbations, render_runs, render_segments, render_summary,
 };
 use perturb_study::route::Route;
 use std::path::{Path, PathBuf};
@@ -15,19 +15,29 @@ use std::path::{Path, PathBuf};
 #[command(
     args_conflicts_with_subcommands = true,
     subcommand_negates_reqs = true,
-    after_help = "Reads every run (a rosbag2 MCAP bag: a .mcap file or a rosbag2 folder) in RUNS_DIR and one
-folder down (the sub-folder's name is the run's group, e.g. a weather condition). Each run's
-/perturb/events channel says which perturbation and severity was active; a run whose condition
-changes is split into segments (\"nominal\" = no perturbation). Topics are decoded by the schema
-stored in the bag, so any message type works; fields are paths like pose.pose.position or
-drive.steering_angle.
+    after_help = "Reads every run in RUNS_DIR and one folder down: each bag file (.mcap, .bag, .bag.active) and
+each rosbag2 folder (metadata.yaml, or only NAME_N.mcap files) is one run, never merged with
+another; every other sub-folder is a group (e.g. a weather condition) whose bags are runs named
+group/name. Other files are listed as skipped. Each run's /perturb/events channel (or, with
+--events-bags, the events recorded apart by perturb-bridge record, matched by time) says which
+perturbation and severity was active; a run whose condition changes is split into segments
+(\"nominal\" = no perturbation). Topics are decoded by the schema stored in the bag, so any
+message type works; fields are paths like pose.pose.position or drive.steering_angle. How to
+record a run on the vehicle: docs/recording.md.
+
+With a route, each run is trimmed to it (--trim-to-route): it starts where the vehicle first
+comes within --goal-tolerance of the route's start and ends at the goal. A run whose failure
+cannot be judged (no route, no pose, never on the route) is `unjudged` with the reason, never
+`ok`; failure rates count judged runs only.
 
 Per run, per segment, per (perturbation, severity) and per perturbation (the paper's RQ3 table):
   completion   share of the route length reached before the end or the failure (needs --route)
   failure      collision, takeover (signals), understeer / oversteer / road_departure (CTE over
                --cte-threshold, by the route's curvature there), erratic_start (an oscillation
                over --erratic-threshold before --erratic-distance m), timeout, incomplete
-  cte_avg/max  |lateral distance| to the route; a failing run leaves out its last --cte-exclude m
+  cte_avg/max  |lateral distance| to the reference region of --reference-runs (the paper's: the
+               band N nominal drives span per arc length; 0 inside it), or to the route; a
+               failing run leaves out its last --cte-exclude m
   jitter_*     mean, max, std of |change between consecutive steering commands|
   coverage_5m  share of (objects message, known vehicle within --near-field m) pairs detected
   duration_s   seconds to the end or the failure
@@ -52,7 +62,7 @@ pub struct Args {
     runs: Option<PathBuf>,
     #[command(flatten)]
     run: RunArgs,
-    /// Write every table (markdown and CSV), analysis.json, hotspots and map.png into this folder.
+    /// Write every table (markdown and CSV), analysis.json, hotspots and map.svg into this folder.
     #[arg(long)]
     out: Option<PathBuf>,
     /// Print the whole analysis as JSON (runs, segments, conditions, perturbations, hotspots,
@@ -71,7 +81,7 @@ pub struct Args {
     /// Hotspots: failures within --eps that make a hotspot (the failure itself included).
     #[arg(long, default_value_t = 2)]
     min_points: usize,
-    /// Write the trajectory map here (default OUT/map.png with --out).
+    /// Write the trajectory map here, as SVG (default OUT/map.svg with --out).
     #[arg(long)]
     map: Option<PathBuf>,
     /// Width of the map in pixels.
@@ -113,9 +123,11 @@ cte_avg, jitter_avg, coverage_5m, completion (those present in the tables)."
     #[command(
         after_help = "Each --set NAME=DIR is a folder of runs; a run's condition is the sub-folder
 it is in (DIR/mud/run1.mcap: `mud`), or the perturbation active through it for runs directly in
-DIR. Per (condition, set): completion and failure type of every run, CTE and jitter averaged
-over every run (failing ones up to the failure, as the paper's RQ4 table; --aggregate
-non-failing to leave failing runs out).
+DIR. Per (condition, set): completion and failure type of every run; CTE and jitter of every run
+over the condition's shared non-failing portion (the paper's RQ4): the route up to where the
+condition's earliest failure happened (over every set), less --cte-exclude metres, the whole
+route when no run failed (column shared_until_m). --aggregate all: each run up to its own
+failure; --aggregate non-failing: only the runs that did not fail.
 
 Example:
   perturb analyze compare --set FT=ft/ --set Non-FT=baseline/ --route route.csv \\
@@ -127,9 +139,29 @@ Example:
 /// How runs are read and judged (shared by `analyze` and `analyze compare`).
 #[derive(clap::Args)]
 struct RunArgs {
-    /// Reference route: a CSV with columns x,y in the pose frame.
+    /// Reference route: a CSV with columns x,y in the pose frame (default with --reference-runs:
+    /// the centre line of the nominal drives).
     #[arg(long)]
     route: Option<PathBuf>,
+    /// Nominal drives of the route (a folder of runs) whose per-arc-length band is the reference
+    /// region the CTE is measured against (the paper's RQ3 uses three).
+    #[arg(long, value_name = "DIR")]
+    reference_runs: Option<PathBuf>,
+    /// Grid spacing of the reference region along the route, metres.
+    #[arg(long, default_value_t = 1.0)]
+    reference_bin: f64,
+    /// What the CTE is measured against: the reference region (with --reference-runs) or the
+    /// route polyline.
+    #[arg(long, value_enum, default_value_t = CteArg::Region)]
+    cte_to: CteArg,
+    /// Trim each run to the route: start where the vehicle first comes within --goal-tolerance
+    /// of the route's start, end at the goal (only with a route).
+    #[arg(long, action = clap::ArgAction::Set, default_value_t = true, value_name = "BOOL")]
+    trim_to_route: bool,
+    /// Folder of bags holding the /perturb/events recorded apart from the runs (perturb-bridge
+    /// record beside rosbag record), matched to each run by log time.
+    #[arg(long, value_name = "DIR")]
+    events_bags: Option<PathBuf>,
     /// Pose topic (geometry_msgs/PoseStamped, nav_msgs/Odometry, ...).
     #[arg(long)]
     pose_topic: Option<String>,
@@ -167,12 +199,19 @@ struct RunArgs {
     /// Field of the takeover topic (default: data for std_msgs; none: any message).
     #[arg(long)]
     takeover_field: Option<String>,
+    /// The takeover fires when the field changes to this value (e.g. 0 for Autoware Mini's
+    /// /vehicle/vehicle_status drivemode turning manual) instead of when it is true.
+    #[arg(long)]
+    takeover_value: Option<String>,
     /// Collision topic: a failure at the first message whose field is true.
     #[arg(long)]
     collision_topic: Option<String>,
     /// Field of the collision topic (default: data for std_msgs; none: any message).
     #[arg(long)]
     collision_field: Option<String>,
+    /// The collision fires when the field changes to this value instead of when it is true.
+    #[arg(long)]
+    collision_value: Option<String>,
     /// The perturbation events topic.
     #[arg(long, default_value = perturb_bag::events::EVENTS_TOPIC)]
     events_topic: String,
@@ -212,8 +251,10 @@ struct RunArgs {
     /// Segments shorter than this many seconds merge into the next one.
     #[arg(long, default_value_t = 0.5)]
     min_segment: f64,
-    /// Which runs the per-perturbation CTE and jitter average (default: non-failing for
-    /// analyze, all for compare).
+    /// Which runs the per-perturbation CTE and jitter average: non-failing (judged ok; the
+    /// default of analyze, the paper's RQ3), all (failing ones up to the failure), or shared
+    /// (compare only, its default: every run over the shared non-failing portion, the paper's
+    /// RQ4).
     #[arg(long, value_enum)]
     aggregate: Option<AggregateArg>,
     /// Jitter per command (the paper) or per second (a rate).
@@ -234,6 +275,13 @@ enum FrameArg {
 enum AggregateArg {
     NonFailing,
     All,
+    Shared,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum CteArg {
+    Region,
+    Route,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -287,8 +335,10 @@ struct CompareArgs {
 
 impl RunArgs {
     fn config(&self, default_aggregate: Aggregate) -> Result<AnalyzeConfig> {
-        if self.route.is_some() && self.pose_topic.is_none() {
-            bail!("--route needs --pose-topic: the topic with the vehicle's position");
+        if (self.route.is_some() || self.reference_runs.is_some()) && self.pose_topic.is_none() {
+            bail!(
+                "--route and --reference-runs need --pose-topic: the topic with the vehicle's position"
+            );
         }
         let tf = |topic: &Option<String>, field: &Option<String>| {
             topic.as_ref().map(|t| TopicField {
@@ -302,8 +352,32 @@ impl RunArgs {
         if self.steering_field.is_some() && self.steering_topic.is_none() {
             bail!("--steering-field needs --steering-topic");
         }
-        Ok(AnalyzeConfig {
+        for (value, topic, name) in [
+            (&self.takeover_value, &self.takeover_topic, "takeover"),
+            (&self.collision_value, &self.collision_topic, "collision"),
+        ] {
+            if value.is_some() && topic.is_none() {
+                bail!("--{name}-value needs --{name}-topic");
+            }
+        }
+        let aggregate = match self.aggregate {
+            Some(AggregateArg::All) => Aggregate::All,
+            Some(AggregateArg::NonFailing) => Aggregate::NonFailing,
+            Some(AggregateArg::Shared) => Aggregate::Shared,
+            None => default_aggregate,
+        };
+        if aggregate == Aggregate::Shared && default_aggregate != Aggregate::Shared {
+            bail!(
+                "--aggregate shared compares sets of runs: use it with `perturb analyze compare`"
+            );
+        }
+        let mut cfg = AnalyzeConfig {
             route: self.route.as_deref().map(Route::from_csv).transpose()?,
+            cte_to: match self.cte_to {
+                CteArg::Region => CteTo::Region,
+                CteArg::Route => CteTo::Route,
+            },
+            trim_to_route: self.trim_to_route,
             pose: tf(&self.pose_topic, &self.pose_field),
             steering: tf(&self.steering_topic, &self.steering_field),
             objects: self.objects_topic.as_ref().map(|t| ObjectsConfig {
@@ -322,6 +396,8 @@ impl RunArgs {
                 .transpose()?,
             takeover: tf(&self.takeover_topic, &self.takeover_field),
             collision: tf(&self.collision_topic, &self.collision_field),
+            takeover_value: self.takeover_value.clone(),
+            collision_value: self.collision_value.clone(),
             events_topic: self.events_topic.clone(),
             event_streams: self.event_stream.clone(),
             cte_threshold: self.cte_threshold,
@@ -335,17 +411,44 @@ impl RunArgs {
             near_field_m: self.near_field,
             match_distance_m: self.match_distance,
             min_segment_s: self.min_segment,
-            aggregate: match self.aggregate {
-                Some(AggregateArg::All) => Aggregate::All,
-                Some(AggregateArg::NonFailing) => Aggregate::NonFailing,
-                None => default_aggregate,
-            },
+            aggregate,
             jitter_unit: match self.jitter_per {
                 JitterArg::Command => JitterUnit::Command,
                 JitterArg::Second => JitterUnit::Second,
             },
             ..AnalyzeConfig::default()
-        })
+        };
+        if let Some(dir) = &self.events_bags {
+            let ev = perturb_study::analyze::load_events_bags(dir, &cfg.events_topic)?;
+            eprintln!(
+                "{} perturbation events from {} bag(s) in {}",
+                ev.events.len(),
+                ev.bags.len(),
+                dir.display()
+            );
+            cfg.external_events = Some(std::sync::Arc::new(ev));
+        }
+        if let Some(dir) = &self.reference_runs {
+            let set = self.pool()?.install(|| {
+                perturb_study::analyze::reference_from_runs(dir, &cfg, self.reference_bin)
+            })?;
+            for n in &set.notes {
+                eprintln!("note: {n}");
+            }
+            eprintln!(
+                "reference region from {} nominal drive(s) in {}{}",
+                set.region.runs.len(),
+                dir.display(),
+                if set.derived_route {
+                    format!("; route: their centre line ({:.1} m)", set.route.length())
+                } else {
+                    String::new()
+                }
+            );
+            cfg.route = Some(set.route);
+            cfg.reference = Some(set.region);
+        }
+        Ok(cfg)
     }
 
     fn pool(&self) -> Result<rayon::ThreadPool> {
@@ -376,12 +479,12 @@ pub fn run(a: Args) -> Result<()> {
     let map_path = a
         .map
         .clone()
-        .or_else(|| a.out.as_ref().map(|o| o.join("map.png")));
+        .or_else(|| a.out.as_ref().map(|o| o.join("map.svg")));
     if let Some(dir) = &a.out {
         write_outputs(dir, &analysis, &hot)?;
     }
     if let Some(path) = &map_path {
-        draw_map(path, cfg.route.as_ref(), &analysis, &hot, a.map_width)?;
+        draw_map(path, &analysis, &hot, a.map_width)?;
     }
     if a.json {
         print!("{}", analysis_json(&analysis, &hot));
@@ -403,6 +506,10 @@ pub fn run(a: Args) -> Result<()> {
             eprintln!("note: run `{}`: {n}", r.run);
         }
     }
+    for sk in &analysis.skipped {
+        eprintln!("skipped: {}: {}", sk.path.display(), sk.reason);
+    }
+    eprint!("{}", render_summary(&analysis.summary));
     if let (Some(dir), false) = (&a.out, a.json) {
         eprintln!(
             "tables, analysis.json and the map written to {}",
@@ -490,25 +597,32 @@ fn write_outputs(
     write(&dir.join("analysis.json"), &analysis_json(analysis, hot))
 }
 
-/// The trajectory map with the failure hotspots, as a PNG at `path` (nothing when there is
+/// The trajectory map with the failure hotspots, as an SVG at `path` (nothing when there is
 /// nothing to draw).
 fn draw_map(
     path: &Path,
-    route: Option<&perturb_study::route::Route>,
     analysis: &perturb_study::analyze::Analysis,
     hot: &perturb_study::hotspots::Hotspots,
     width: u32,
 ) -> Result<()> {
+    if path.extension().is_some_and(|e| e != "svg") {
+        bail!(
+            "--map {}: the map is written as SVG (vector; a browser or rsvg-convert turns it into a picture); give a .svg path",
+            path.display()
+        );
+    }
     let options = perturb_study::plot::MapOptions {
         width,
         ..Default::default()
     };
-    match perturb_study::plot::trajectory_map(route, &analysis.runs, hot, &options) {
-        Some(img) => perturb_study::files::save_image(
-            path,
-            &img.view(),
-            perturb_core::formats::FileKind::Png,
-        )?,
+    match perturb_study::plot::trajectory_map(
+        analysis.route.as_ref(),
+        analysis.reference.as_ref(),
+        &analysis.runs,
+        hot,
+        &options,
+    )? {
+        Some(svg) => write(path, &svg)?,
         None => eprintln!("no map: nothing to draw"),
     }
     Ok(())
@@ -579,12 +693,20 @@ fn transfer(t: TransferArgs) -> Result<()> {
         "{} (perturbation, severity) pairs in both tables; {} resamples from seed {}",
         res.matched, res.resamples, res.seed
     );
+    for r in res.rows.iter().filter(|r| r.note.is_some()) {
+        eprintln!(
+            "note: {} vs {}: {}",
+            r.offline,
+            r.closed_loop,
+            r.note.as_deref().unwrap_or_default()
+        );
+    }
     print!("{}", render(&res, t.format));
     Ok(())
 }
 
 fn compare(c: CompareArgs) -> Result<()> {
-    let cfg = c.run.config(Aggregate::All)?;
+    let cfg = c.run.config(Aggregate::Shared)?;
     let pool = c.run.pool()?;
     let mut sets = Vec::new();
     let mut failed = 0;
@@ -599,7 +721,10 @@ fn compare(c: CompareArgs) -> Result<()> {
         failed += a.errors.len();
         sets.push((name.to_string(), a));
     }
-    let rows = perturb_study::compare::compare(&sets, cfg.aggregate);
+    let rows = perturb_study::compare::compare(&sets, &cfg);
+    for (name, a) in &sets {
+        eprint!("set `{name}`: {}", render_summary(&a.summary));
+    }
     print!("{}", perturb_study::compare::render(&rows, c.format));
     if failed > 0 {
         bail!("{failed} runs could not be analysed (the others were)");

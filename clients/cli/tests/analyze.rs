@@ -7,7 +7,6 @@ mod common;
 mod support;
 
 use common::{ok, perturb, tmp};
-use perturb_core::formats::picture;
 use serde_json::Value;
 use support::{Run, route_length, write_route};
 
@@ -119,23 +118,41 @@ fn analyze_writes_tables_json_with_stable_fields_and_a_map() {
         "{md}"
     );
     assert!(md.contains("[C,C]"), "{md}");
-    // The map: route, trajectories coloured by family, the hotspot's red outline.
-    let png = std::fs::read(out.join("map.png")).unwrap();
-    let img = picture::decode(&png).unwrap();
-    assert_eq!(img.width, 1200);
-    let count = |c: [u8; 3]| {
-        img.data
-            .chunks(3)
-            .filter(|p| p[0] == c[0] && p[1] == c[1] && p[2] == c[2])
-            .count()
-    };
-    assert!(count([215, 215, 215]) > 1000, "no route drawn");
-    assert!(count([200, 0, 0]) > 50, "no hotspot outline");
-    assert!(count([150, 150, 150]) > 100, "no nominal trajectory");
+    // The map, an SVG drawn with plotters: axes in metres, the route, trajectories coloured by
+    // family, the hotspot's outline and label, the legend and the scale bar.
+    let svg = std::fs::read_to_string(out.join("map.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    let texts = svg_texts(&svg);
+    for t in [
+        "x (m)",
+        "y (m)",
+        "H0",
+        "Legend",
+        "Scale",
+        "collision (C)",
+        "in no hotspot (noise)",
+        "nominal",
+    ] {
+        assert!(
+            texts.iter().any(|x| x == t),
+            "text `{t}` missing: {texts:?}"
+        );
+    }
     assert!(
-        count([31, 119, 180]) > 100,
-        "no trajectory in the first family colour"
+        texts
+            .iter()
+            .any(|t| t.ends_with(" m") && t[..t.len() - 2].parse::<f64>().is_ok()),
+        "no scale bar length: {texts:?}"
     );
+    let upper = svg.to_ascii_uppercase();
+    for (colour, what) in [
+        ("#CDCDCD", "route"),
+        ("#808080", "nominal trajectory"),
+        ("#0072B2", "first family colour"),
+        ("#C80000", "hotspot outline"),
+    ] {
+        assert!(upper.contains(colour), "no {what} ({colour})");
+    }
     // The default output: tables with headings.
     let text = ok(&[
         "analyze",
@@ -463,4 +480,15 @@ with rosbag.Bag(sys.argv[1], 'w') as b:
         (rain["cte_max"].as_f64().unwrap() - 1.0).abs() < 1e-6,
         "{rain}"
     );
+}
+
+/// The text contents of an SVG's `<text>` elements, trimmed.
+fn svg_texts(svg: &str) -> Vec<String> {
+    svg.split("<text")
+        .skip(1)
+        .filter_map(|t| {
+            let body = &t[t.find('>')? + 1..];
+            Some(body[..body.find("</text>")?].trim().to_string())
+        })
+        .collect()
 }

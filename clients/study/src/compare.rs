@@ -4,10 +4,13 @@
 //! The condition of a run is the sub-folder it is in (`ft/mud/run1.mcap` is condition `mud`),
 //! or, for runs directly in the set's folder, the perturbation active through the run
 //! (`nominal`, an ID, or `mixed`). Rows are per (condition, set); completion and failure type of
-//! every run, CTE and jitter aggregated as in [`crate::analyze::aggregate`] (by default over every
-//! run, failing ones up to the failure, as the paper's RQ4 table).
+//! every run, CTE and jitter aggregated as in [`crate::analyze::aggregate`], by default over
+//! every run's part of the shared non-failing portion of the route (the paper's RQ4: "comparison
+//! is restricted to the shared non-failing portion of each run").
 
-use crate::analyze::{Aggregate, Aggregated, Analysis, aggregate};
+use crate::analyze::{
+    Aggregate, Aggregated, Analysis, AnalyzeConfig, Metrics, RunResult, aggregate, window_until,
+};
 use crate::table::{Table, num, raw};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -21,16 +24,34 @@ pub struct CompareRow {
     pub set: String,
     /// The runs, by name.
     pub run_names: Vec<String>,
+    /// With [`Aggregate::Shared`]: the trajectory metrics cover the route up to this arc length,
+    /// metres (the shared non-failing portion of the condition's runs, every set together).
+    pub shared_until_m: Option<f64>,
     /// The aggregated metrics.
     #[serde(flatten)]
     pub metrics: Aggregated,
 }
 
+/// How far along the route a run got before failing, less `exclude` metres (the CTE's d); the
+/// route's length for a run that did not fail; None without a route or progress.
+fn safe_reach(r: &RunResult, length: f64, exclude: f64) -> Option<f64> {
+    let last = *r.track.reached.last()?;
+    Some(if r.metrics.failure.is_some() {
+        (last - exclude).max(0.0)
+    } else {
+        length
+    })
+}
+
 /// The rows of every set, conditions in order (nominal first, then as they first appear), the
-/// sets in the order given within a condition.
-pub fn compare(sets: &[(String, Analysis)], policy: Aggregate) -> Vec<CompareRow> {
+/// sets in the order given within a condition. With `cfg.aggregate` [`Aggregate::Shared`] (the
+/// paper's RQ4), each condition's trajectory metrics cover only the part of the route every one
+/// of its runs (in every set) drove before failing, less `cfg.cte_exclude_m` before the earliest
+/// failure; completion and failures are the runs' own.
+pub fn compare(sets: &[(String, Analysis)], cfg: &AnalyzeConfig) -> Vec<CompareRow> {
+    let policy = cfg.aggregate;
     let mut conditions: Vec<String> = Vec::new();
-    let mut rows: BTreeMap<(String, usize), Vec<&crate::analyze::RunResult>> = BTreeMap::new();
+    let mut rows: BTreeMap<(String, usize), Vec<&RunResult>> = BTreeMap::new();
     for (k, (_, a)) in sets.iter().enumerate() {
         for r in &a.runs {
             let c = r.group.clone().unwrap_or_else(|| r.perturbation.clone());
@@ -41,18 +62,49 @@ pub fn compare(sets: &[(String, Analysis)], policy: Aggregate) -> Vec<CompareRow
         }
     }
     conditions.sort_by_key(|c| c != "nominal");
+    let length = sets
+        .iter()
+        .find_map(|(_, a)| a.route.as_ref().map(|r| r.length()));
     let mut out = Vec::new();
     for c in &conditions {
+        let shared = (policy == Aggregate::Shared)
+            .then(|| {
+                let length = length?;
+                rows.iter()
+                    .filter(|((cc, _), _)| cc == c)
+                    .flat_map(|(_, runs)| runs.iter())
+                    .filter_map(|r| safe_reach(r, length, cfg.cte_exclude_m))
+                    .reduce(f64::min)
+            })
+            .flatten();
         for (k, (name, _)) in sets.iter().enumerate() {
             let Some(runs) = rows.get(&(c.clone(), k)) else {
                 continue;
             };
-            let metrics: Vec<&crate::analyze::Metrics> = runs.iter().map(|r| &r.metrics).collect();
+            let metrics: Vec<Metrics> = runs
+                .iter()
+                .map(|r| match shared {
+                    Some(until) => {
+                        let w = window_until(&r.track, until, cfg.jitter_unit);
+                        Metrics {
+                            cte_avg: w.cte_avg,
+                            cte_max: w.cte_max,
+                            jitter_avg: w.jitter_avg,
+                            jitter_max: w.jitter_max,
+                            jitter_std: w.jitter_std,
+                            ..r.metrics.clone()
+                        }
+                    }
+                    None => r.metrics.clone(),
+                })
+                .collect();
+            let refs: Vec<&Metrics> = metrics.iter().collect();
             out.push(CompareRow {
                 condition: c.clone(),
                 set: name.clone(),
                 run_names: runs.iter().map(|r| r.run.clone()).collect(),
-                metrics: aggregate(&metrics, policy),
+                shared_until_m: shared,
+                metrics: aggregate(&refs, policy),
             });
         }
     }
@@ -77,6 +129,7 @@ pub fn render(rows: &[CompareRow], format: crate::Format) -> String {
         ("jitter_avg", true),
         ("jitter_max", true),
         ("jitter_std", true),
+        ("shared_until_m", true),
     ]);
     let mut last = String::new();
     for r in rows {
@@ -88,9 +141,10 @@ pub fn render(rows: &[CompareRow], format: crate::Format) -> String {
             .collect();
         let fails: Vec<String> = r
             .metrics
-            .failures
+            .outcomes
             .iter()
-            .map(|f| f.map_or("ok".into(), |f| f.letter().to_string()))
+            .zip(&r.metrics.failures)
+            .map(|(o, f)| crate::analyze::outcome_letter(*o, *f).to_string())
             .collect();
         let cond = if csv || r.condition != last {
             r.condition.clone()
@@ -113,6 +167,7 @@ pub fn render(rows: &[CompareRow], format: crate::Format) -> String {
             f(r.metrics.jitter_avg, 2),
             f(r.metrics.jitter_max, 2),
             f(r.metrics.jitter_std, 2),
+            f(r.shared_until_m, 1),
         ]);
     }
     t.render(format)

@@ -70,6 +70,14 @@ pub enum StudyError {
         /// What is wrong.
         reason: String,
     },
+    /// A chart could not be drawn.
+    #[error("drawing {what}: {reason}")]
+    Plot {
+        /// The chart.
+        what: String,
+        /// What the drawing library said.
+        reason: String,
+    },
     /// A table given as input (CSV or JSON) is unusable.
     #[error("{}{}: {reason}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
     Table {

@@ -38,6 +38,10 @@ const NOT_METRICS: [&str; 10] = [
 /// Metrics where a smaller value is worse (for the top-k rankings).
 const SMALLER_IS_WORSE: [&str; 3] = ["retention", "completion", "coverage_5m"];
 
+/// Fewer matched pairs than this give no confidence interval (the bootstrap over 2-4 pairs has
+/// a handful of distinct resamples, most with a constant side) and a note on the sample size.
+pub const MIN_PAIRS_FOR_CI: usize = 5;
+
 /// The default offline metrics, when present.
 pub const DEFAULT_OFFLINE: [&str; 4] = ["mse", "max_abs_deviation", "retention_loss", "ate"];
 /// The default closed-loop metrics, when present.
@@ -224,6 +228,23 @@ pub struct TransferRow {
     pub top_offline: Vec<String>,
     /// The closed-loop ranking's top k.
     pub top_closed_loop: Vec<String>,
+    /// The matched pairs (for scatter plots).
+    pub points: Vec<TransferPoint>,
+    /// What a reader must know about this row (too few pairs, a constant side).
+    pub note: Option<String>,
+}
+
+/// One matched (perturbation, severity) pair of a row.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TransferPoint {
+    /// Perturbation ID.
+    pub perturbation: String,
+    /// Severity.
+    pub severity: u8,
+    /// The offline metric's value.
+    pub offline: f64,
+    /// The closed-loop metric's value.
+    pub closed_loop: f64,
 }
 
 /// The whole analysis.
@@ -350,8 +371,26 @@ fn transfer_row(
     let y: Vec<f64> = pairs.iter().map(|p| p.2).collect();
     let rho = stats::spearman(&x, &y);
     let p = rho.and_then(|r| stats::spearman_p(r, x.len()));
-    let ci =
-        rho.and_then(|_| stats::bootstrap_spearman_ci(&x, &y, cfg.resamples, cfg.seed, cfg.level));
+    let few = x.len() < MIN_PAIRS_FOR_CI;
+    let ci = rho
+        .filter(|_| !few)
+        .and_then(|_| stats::bootstrap_spearman_ci(&x, &y, cfg.resamples, cfg.seed, cfg.level));
+    let note = if few {
+        Some(format!(
+            "only {} matched pair{}: fewer than {MIN_PAIRS_FOR_CI}, no confidence interval; rho {}",
+            x.len(),
+            if x.len() == 1 { "" } else { "s" },
+            match x.len() {
+                0 | 1 => "is undefined",
+                2 => "of 2 pairs is always +1 or -1 and p is undefined",
+                _ => "and p rest on very few pairs",
+            }
+        ))
+    } else if rho.is_none() {
+        Some("one side is constant over the pairs: rho is undefined".into())
+    } else {
+        None
+    };
     let worse = |name: &str, v: &[f64]| -> Vec<f64> {
         if SMALLER_IS_WORSE.contains(&name) {
             v.iter().map(|x| -x).collect()
@@ -381,6 +420,16 @@ fn transfer_row(
         top_k_overlap: stats::top_k_overlap(&wx, &wy, cfg.top_k),
         top_offline: top(&wx),
         top_closed_loop: top(&wy),
+        points: pairs
+            .iter()
+            .map(|(k, x, y)| TransferPoint {
+                perturbation: k.0.clone(),
+                severity: k.1,
+                offline: *x,
+                closed_loop: *y,
+            })
+            .collect(),
+        note,
     }
 }
 
@@ -424,5 +473,21 @@ pub fn render(t: &Transfer, format: crate::Format) -> String {
             f(r.top_k_overlap, 2),
         ]);
     }
-    table.render(format)
+    let mut out = table.render(format);
+    if !csv {
+        for r in t.rows.iter().filter(|r| r.note.is_some()) {
+            let line = format!(
+                "note: {} vs {}: {}",
+                r.offline,
+                r.closed_loop,
+                r.note.as_deref().unwrap_or_default()
+            );
+            out.push_str(&if format == crate::Format::Markdown {
+                format!("\n> {line}\n")
+            } else {
+                format!("{line}\n")
+            });
+        }
+    }
+    out
 }

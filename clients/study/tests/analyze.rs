@@ -73,9 +73,11 @@ fn every_metric_of_synthetic_runs_matches_its_construction() {
     offset.steer_count = Some(201);
     offset.cond = Some(Box::new(|_| Some(("C-A1", 3))));
     offset.write(&runs_dir);
+    let offset_goal = support::goal_time(&offset, 3.0);
     let offsets: Vec<f64> = offset
         .pose_times()
         .iter()
+        .filter(|t| **t <= offset_goal)
         .map(|t| {
             if (offset.s_of_t)(*t) < l / 2.0 {
                 1.0
@@ -133,11 +135,13 @@ fn every_metric_of_synthetic_runs_matches_its_construction() {
     close(r.metrics.jitter_avg, 0.1, 1e-6, "nominal jitter_avg");
     close(r.metrics.jitter_max, 0.1, 1e-6, "nominal jitter_max");
     close(r.metrics.jitter_std, 0.0, 1e-6, "nominal jitter_std");
+    // Trimmed to the route: it ends at the goal, not at the end of the recording.
+    assert!(nominal_last > support::goal_time(&nominal, 3.0) + 1.0);
     close(
         Some(r.metrics.duration_s),
-        nominal_last,
+        support::goal_time(&nominal, 3.0),
         1e-6,
-        "nominal duration",
+        "nominal duration (to the goal)",
     );
     assert_eq!(r.metrics.coverage_5m, None);
 
@@ -222,7 +226,7 @@ fn every_metric_of_synthetic_runs_matches_its_construction() {
     // nominal, understeer, oversteer, drift, erratic: 4 of 5 fail.
     assert_eq!(nominal_row.metrics.runs, 5);
     close(
-        Some(nominal_row.metrics.failure_rate),
+        nominal_row.metrics.failure_rate,
         0.8,
         1e-12,
         "nominal failure rate",
@@ -307,7 +311,10 @@ fn events_switching_mid_run_split_it_into_segments() {
     let bounds: Vec<(f64, f64)> = segs.iter().map(|s| (s.start_s, s.end_s)).collect();
     assert_eq!(bounds[0], (0.0, 5.0));
     assert_eq!(bounds[1], (5.0, 12.0));
-    assert!((bounds[2].0 - 12.0).abs() < 1e-9 && (bounds[2].1 - last).abs() < 1e-6);
+    // The run is trimmed at the goal: the first pose within 3 m of the route's end.
+    let goal = support::goal_time(&r, 3.0);
+    assert!(last > goal + 1.0, "the recording goes on after the goal");
+    assert!((bounds[2].0 - 12.0).abs() < 1e-9 && (bounds[2].1 - goal).abs() < 1e-6);
     for (s, (cte, jitter)) in segs.iter().zip([(0.2, 0.1), (0.8, 0.3), (0.4, 0.2)]) {
         close(
             s.metrics.cte_avg,

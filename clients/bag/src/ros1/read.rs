@@ -420,7 +420,26 @@ impl Ros1Bag {
         let mut pos = self.first_record;
         while pos < self.map.len() {
             let outcome = (|| -> Result<(ControlFlow<()>, usize), Stop> {
-                let r = record_at(&self.map, pos)?;
+                let r = match record_at(&self.map, pos) {
+                    Ok(r) => r,
+                    Err(cut) => {
+                        // A chunk cut by the end of the file (a recording cut short, a partial
+                        // copy): the whole records before the cut are still delivered.
+                        let Some((data, why)) = self.cut_chunk(pos) else {
+                            return Err(Stop::Damage(cut));
+                        };
+                        let mut at = 0;
+                        while let Ok(inner) = record_at(&data, at) {
+                            if deliver(&inner)?.is_break() {
+                                return Ok((ControlFlow::Break(()), self.map.len()));
+                            }
+                            at = inner.end;
+                        }
+                        return Err(Stop::Damage(format!(
+                            "{cut}: the chunk at byte {pos} is cut off ({why}); its records before the cut were read"
+                        )));
+                    }
+                };
                 if r.op()? != OP_CHUNK {
                     return Ok((deliver(&r)?, r.end));
                 }
@@ -446,6 +465,67 @@ impl Ros1Bag {
             }
         }
         Ok((ControlFlow::Continue(()), None))
+    }
+}
+
+impl Ros1Bag {
+    /// The records of a chunk record at `pos` that the end of the file cuts off, as far as they
+    /// go: the chunk's header must be whole; its data is what remains of the file (for `none`)
+    /// or what the decompressor yields from it before it runs out (`bz2`, `lz4`), at most the
+    /// chunk's declared size. None when the record is not such a chunk. Also says what was
+    /// kept.
+    fn cut_chunk(&self, pos: usize) -> Option<(Cow<'_, [u8]>, String)> {
+        let rest = self.map.get(pos..)?;
+        let hlen = u32::from_le_bytes(rest.get(..4)?.try_into().ok()?) as usize;
+        let header = rest.get(4..4 + hlen)?;
+        let fields = super::parse_fields(header).ok()?;
+        let r = Record {
+            fields,
+            data: &[],
+            end: 0,
+        };
+        if r.op().ok()? != OP_CHUNK {
+            return None;
+        }
+        let size = r.u32("size").ok()? as u64;
+        guard::check_decompressed("chunk", pos as u64, size, self.map.len() as u64).ok()?;
+        let start = 4 + hlen + 4;
+        let stored = rest
+            .get(4 + hlen..start)
+            .map_or(0, |b| u32::from_le_bytes(b.try_into().expect("4 bytes")));
+        let avail = rest.get(start..).unwrap_or(&[]);
+        let partial = |what: &str, reader: &mut dyn Read| -> (Cow<'_, [u8]>, String) {
+            let mut out = Vec::new();
+            let mut buf = [0u8; 1 << 14];
+            while (out.len() as u64) < size {
+                match reader.read(&mut buf) {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => out.extend_from_slice(&buf[..n]),
+                }
+            }
+            out.truncate(size as usize);
+            let why = format!(
+                "{} of its {stored} {what} bytes remain, {} of {size} bytes decompressed from them",
+                avail.len(),
+                out.len()
+            );
+            (Cow::Owned(out), why)
+        };
+        Some(match r.text("compression").ok()? {
+            "none" => {
+                let kept = &avail[..avail.len().min(size as usize)];
+                (
+                    Cow::Borrowed(kept),
+                    format!("{} of its {size} bytes remain", kept.len()),
+                )
+            }
+            "bz2" => partial("bz2", &mut bzip2::read::BzDecoder::new(avail)),
+            "lz4" => {
+                let mut d = lz4::Decoder::new(avail).ok()?;
+                partial("lz4", &mut d)
+            }
+            _ => return None,
+        })
     }
 }
 

@@ -1,6 +1,6 @@
 //! Rows per (perturbation, severity) and per perturbation, as the paper's tables aggregate runs.
 
-use super::{Aggregate, Failure, Metrics, SegmentResult};
+use super::{Aggregate, Failure, Metrics, Outcome, SegmentResult};
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -9,16 +9,20 @@ use std::collections::BTreeMap;
 pub struct Aggregated {
     /// Runs (segments) aggregated.
     pub runs: usize,
+    /// Of these, the ones whose failure could not be judged (never counted as ok).
+    pub unjudged: usize,
     /// Mean completion.
     pub completion: Option<f64>,
     /// Completion of each run, in row order (the paper's bars).
     pub completions: Vec<Option<f64>>,
     /// The most frequent failure type among the failing runs (None: no run failed).
     pub failure: Option<Failure>,
-    /// Failure type of each run (None: it did not fail), in row order.
+    /// Failure type of each run (None: it did not fail or was not judged), in row order.
     pub failures: Vec<Option<Failure>>,
-    /// Failing runs / runs.
-    pub failure_rate: f64,
+    /// Outcome of each run (ok, failed, unjudged), in row order.
+    pub outcomes: Vec<Outcome>,
+    /// Failing runs / judged runs (None when no run was judged).
+    pub failure_rate: Option<f64>,
     /// Mean of the runs' average CTE.
     pub cte_avg: Option<f64>,
     /// Largest of the runs' maximum CTE.
@@ -44,12 +48,13 @@ fn max(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
     v.flatten().reduce(f64::max)
 }
 
-/// Aggregates segments: completion and failures over all of them, trajectory metrics over the
-/// non-failing ones (or all, with [`Aggregate::All`]); coverage over all of them.
+/// Aggregates segments: completion and failures over all of them (the failure rate over the
+/// judged ones), trajectory metrics over the ones judged ok (or all, with [`Aggregate::All`] and
+/// [`Aggregate::Shared`], whose parts the caller chose); coverage over all of them.
 pub fn aggregate(rows: &[&Metrics], policy: Aggregate) -> Aggregated {
     let traj: Vec<&&Metrics> = rows
         .iter()
-        .filter(|r| policy == Aggregate::All || r.failure.is_none())
+        .filter(|r| policy != Aggregate::NonFailing || r.outcome == Outcome::Ok)
         .collect();
     let mut counts: BTreeMap<Failure, usize> = BTreeMap::new();
     for f in rows.iter().filter_map(|r| r.failure) {
@@ -60,17 +65,20 @@ pub fn aggregate(rows: &[&Metrics], policy: Aggregate) -> Aggregated {
         .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
         .map(|(f, _)| *f);
     let n = rows.len();
+    let unjudged = rows
+        .iter()
+        .filter(|r| r.outcome == Outcome::Unjudged)
+        .count();
+    let judged = n - unjudged;
     Aggregated {
         runs: n,
+        unjudged,
         completion: mean(rows.iter().map(|r| r.completion)),
         completions: rows.iter().map(|r| r.completion).collect(),
         failure: dominant,
         failures: rows.iter().map(|r| r.failure).collect(),
-        failure_rate: if n == 0 {
-            0.0
-        } else {
-            counts.values().sum::<usize>() as f64 / n as f64
-        },
+        outcomes: rows.iter().map(|r| r.outcome).collect(),
+        failure_rate: (judged > 0).then(|| counts.values().sum::<usize>() as f64 / judged as f64),
         cte_avg: mean(traj.iter().map(|r| r.cte_avg)),
         cte_max: max(traj.iter().map(|r| r.cte_max)),
         jitter_avg: mean(traj.iter().map(|r| r.jitter_avg)),

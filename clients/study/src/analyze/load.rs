@@ -1,6 +1,7 @@
 //! Reading the configured topics of a run into plain time series, decoding every message by the
 //! schema stored in the bag.
 
+use super::events::ExternalEvents;
 use super::{AnalyzeConfig, Condition, ObjectsFrame, TopicField};
 use crate::error::{Result, StudyError};
 use crate::source::{RunEntry, RunMessage, TopicSchema, open_run};
@@ -302,6 +303,7 @@ pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
         stream_state: BTreeMap::new(),
         other_streams: BTreeMap::new(),
         current: None,
+        signal_state: [None; 2],
     };
     let damage = bag
         .read(&wanted, &mut |m| {
@@ -311,6 +313,11 @@ pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
         .map_err(|e| failed(&e))?;
     if let Some(dmg) = damage {
         notes.push(format!("the bag is damaged; read up to the damage: {dmg}"));
+    }
+    if readers.events.is_none()
+        && let Some(ext) = &cfg.external_events
+    {
+        c.external(ext);
     }
     c.finish(run, &wanted, notes)
 }
@@ -393,7 +400,20 @@ impl Readers {
         let takeover = flag(&cfg.takeover, "takeover")?;
         let collision = flag(&cfg.collision, "collision")?;
         let events = if has(&cfg.events_topic) {
+            if cfg.external_events.is_some() {
+                notes.push(format!(
+                    "the bag has its own `{}`: the events recorded apart are not used for it",
+                    cfg.events_topic
+                ));
+            }
             Some(reader(run, topics, &cfg.events_topic, "events")?)
+        } else if let Some(ext) = &cfg.external_events {
+            notes.push(format!(
+                "no `{}` topic in the bag: its events come from the {} events bag(s) recorded apart, matched by log time",
+                cfg.events_topic,
+                ext.bags.len()
+            ));
+            None
         } else {
             notes.push(format!(
                 "no `{}` topic: the whole run counts as nominal",
@@ -450,6 +470,33 @@ struct Collector<'a> {
     /// Events of streams the configuration does not follow, per stream.
     other_streams: BTreeMap<String, usize>,
     current: Option<Condition>,
+    /// Per signal (takeover, collision) with a value: whether its last message had it.
+    signal_state: [Option<bool>; 2],
+}
+
+/// A signal field that is "true": non-zero, `true`, or a non-empty string other than `0` and
+/// `false`.
+fn truthy(v: &Value) -> bool {
+    match v {
+        Value::String(st) => {
+            let st = st.trim().to_ascii_lowercase();
+            !(st.is_empty() || st == "0" || st == "false")
+        }
+        other => other.as_bool().unwrap_or(false),
+    }
+}
+
+/// A signal field equal to `want`: as numbers when both are numbers, as text otherwise.
+fn equals(v: &Value, want: &str) -> bool {
+    let want = want.trim();
+    match (v.as_f64(), want.parse::<f64>()) {
+        (Some(a), Ok(b)) => a == b,
+        _ => match v {
+            Value::String(s) => s.trim() == want,
+            Value::Bool(b) => want.eq_ignore_ascii_case(if *b { "true" } else { "false" }),
+            _ => false,
+        },
+    }
 }
 
 impl Collector<'_> {
@@ -537,9 +584,13 @@ impl Collector<'_> {
     /// The takeover and collision signals: the first message that fires each.
     fn flags(&mut self, m: RunMessage<'_>, t: f64) {
         let r = self.readers;
-        for (sig, collision) in [(&r.takeover, false), (&r.collision, true)] {
+        let cfg = self.cfg;
+        for (k, sig, value) in [
+            (0, &r.takeover, &cfg.takeover_value),
+            (1, &r.collision, &cfg.collision_value),
+        ] {
             let Some(s) = sig else { continue };
-            let slot = if collision {
+            let slot = if k == 1 {
                 &self.d.collision
             } else {
                 &self.d.takeover
@@ -547,18 +598,17 @@ impl Collector<'_> {
             if m.topic != s.r.topic || slot.is_some() {
                 continue;
             }
-            let fired = match &s.field {
-                None => Ok(true),
-                Some(f) => s.r.codec.get(m.data, f).map(|v| match v {
-                    Value::String(st) => {
-                        let st = st.trim().to_ascii_lowercase();
-                        !(st.is_empty() || st == "0" || st == "false")
-                    }
-                    other => other.as_bool().unwrap_or(false),
+            let fired = match (&s.field, value) {
+                (None, _) => Ok(true),
+                (Some(f), None) => s.r.codec.get(m.data, f).map(|v| truthy(&v)),
+                (Some(f), Some(want)) => s.r.codec.get(m.data, f).map(|v| {
+                    let now = equals(&v, want);
+                    let before = self.signal_state[k].replace(now);
+                    now && before == Some(false)
                 }),
             };
             match fired {
-                Ok(true) if collision => self.d.collision = Some(t),
+                Ok(true) if k == 1 => self.d.collision = Some(t),
                 Ok(true) => self.d.takeover = Some(t),
                 Ok(false) => {}
                 Err(e) => self.fail(m.topic, e.to_string()),
@@ -566,7 +616,7 @@ impl Collector<'_> {
         }
     }
 
-    /// A perturbation event: the condition (every followed stream's perturbation) from `t` on.
+    /// A perturbation event message: decoded, then applied.
     fn event(&mut self, e: &Reader, path: &FieldPath, m: RunMessage<'_>, t: f64) {
         let text = e.codec.get(m.data, path);
         let ev = match &text {
@@ -575,10 +625,14 @@ impl Collector<'_> {
             Ok(v) => Err(format!("expected a string, found a {}", v.kind())),
             Err(err) => Err(err.to_string()),
         };
-        let ev = match ev {
-            Ok(ev) => ev,
-            Err(reason) => return self.fail(m.topic, reason),
-        };
+        match ev {
+            Ok(ev) => self.apply_event(ev, t),
+            Err(reason) => self.fail(m.topic, reason),
+        }
+    }
+
+    /// A perturbation event: the condition (every followed stream's perturbation) from `t` on.
+    fn apply_event(&mut self, ev: PerturbationEvent, t: f64) {
         let streams = &self.cfg.event_streams;
         if !(streams.is_empty() || streams.contains(&ev.topic)) {
             *self.other_streams.entry(ev.topic.clone()).or_default() += 1;
@@ -596,6 +650,17 @@ impl Collector<'_> {
         if self.current.as_ref() != Some(&c) {
             self.d.events.push((t, c.clone()));
             self.current = Some(c);
+        }
+    }
+
+    /// The events recorded apart that fall in this run (up to its last message), the last
+    /// one of each stream before its first message included.
+    fn external(&mut self, ext: &ExternalEvents) {
+        let Some(t0) = self.t0 else { return };
+        let window = ext.window(t0, self.last);
+        for (ns, ev) in window {
+            let t = (*ns as f64 - t0 as f64) / 1e9;
+            self.apply_event(ev.clone(), t);
         }
     }
 
@@ -641,6 +706,11 @@ impl Collector<'_> {
         };
         d.t0_ns = t0;
         d.end = self.last.saturating_sub(d.t0_ns) as f64 / 1e9;
+        // Events before the first message (recorded apart) set the condition at t = 0.
+        if let Some(k) = d.events.iter().rposition(|(t, _)| *t <= 0.0) {
+            d.events.drain(..k);
+            d.events[0].0 = 0.0;
+        }
         d.notes = notes;
         // The bag's order is log time; sort defensively (a bag without index is read in file
         // order).

@@ -1,8 +1,11 @@
 //! The metrics of one run and of its segments, from its time series (pure computation).
 
 use super::load::{PoseSample, RunData};
+use super::reference::{ReferenceRegion, positions, tracked_projections};
+use super::trim::{Window, cut, window};
 use super::{
-    AnalyzeConfig, Condition, Failure, JitterUnit, Metrics, ObjectsFrame, RunResult, SegmentResult,
+    AnalyzeConfig, Condition, CteTo, Failure, JitterUnit, Metrics, ObjectsFrame, Outcome,
+    RunResult, SegmentResult,
 };
 use crate::route::Route;
 
@@ -33,15 +36,16 @@ pub fn jitter_stats(steering: &[(f64, f64)], unit: JitterUnit) -> Option<(f64, f
     Some((mean, max, var.sqrt()))
 }
 
-/// Per pose sample: route projection (tracked), progress reached so far (monotone), and the
-/// distance driven so far.
+/// Per pose sample: route projection (tracked), its signed CTE (to the route or the reference
+/// region), progress reached so far (monotone), and the distance driven so far.
 struct Track {
     proj: Vec<crate::route::Projection>,
+    cte: Vec<f64>,
     reached: Vec<f64>,
     driven: Vec<f64>,
 }
 
-fn track(route: Option<&Route>, poses: &[PoseSample]) -> Track {
+fn track(route: Option<&Route>, region: Option<&ReferenceRegion>, poses: &[PoseSample]) -> Track {
     let mut driven = Vec::with_capacity(poses.len());
     let mut d = 0.0;
     for (i, p) in poses.iter().enumerate() {
@@ -54,31 +58,96 @@ fn track(route: Option<&Route>, poses: &[PoseSample]) -> Track {
     let Some(route) = route else {
         return Track {
             proj: Vec::new(),
+            cte: Vec::new(),
             reached: Vec::new(),
             driven,
         };
     };
-    let mut proj = Vec::with_capacity(poses.len());
-    let mut reached = Vec::with_capacity(poses.len());
+    let proj = tracked_projections(route, &positions(poses));
+    let cte = proj
+        .iter()
+        .map(|p| region.map_or(p.offset, |r| r.cte(p)))
+        .collect();
     let mut best: f64 = 0.0;
-    for (i, p) in poses.iter().enumerate() {
-        let pr = if i == 0 {
-            route.project(p.p)
-        } else {
-            route.project_near(
-                p.p,
-                proj.last().map_or(0.0, |q: &crate::route::Projection| q.s),
-            )
-        };
-        best = best.max(pr.s);
-        proj.push(pr);
-        reached.push(best);
-    }
+    let reached = proj
+        .iter()
+        .map(|p| {
+            best = best.max(p.s);
+            best
+        })
+        .collect();
     Track {
         proj,
+        cte,
         reached,
         driven,
     }
+}
+
+/// What a run's per-pose series are, kept for comparisons over a part of the route.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunTrack {
+    /// Pose times (seconds from the run's start).
+    pub t: Vec<f64>,
+    /// Route progress reached by each pose, metres (empty without a route).
+    pub reached: Vec<f64>,
+    /// Signed CTE of each pose, metres (empty without a route).
+    pub cte: Vec<f64>,
+    /// Steering commands (t, value).
+    pub steering: Vec<(f64, f64)>,
+    /// The end of the analysed part: the failure or the end of the run, seconds.
+    pub end: f64,
+}
+
+/// CTE (average, maximum of |CTE|) and jitter (average, maximum, standard deviation) of a run
+/// over the part before it first gets `until_m` metres along the route (and before its
+/// failure); None where there is no sample.
+pub fn window_until(tr: &RunTrack, until_m: f64, unit: JitterUnit) -> WindowMetrics {
+    // The last pose not beyond `until_m` ends the part.
+    let stop = match tr.reached.iter().position(|&s| s > until_m) {
+        Some(0) => 0.0,
+        Some(i) => tr.t[i - 1],
+        None => tr.end,
+    }
+    .min(tr.end);
+    let e: Vec<f64> =
+        tr.t.iter()
+            .zip(&tr.cte)
+            .filter(|(t, _)| **t <= stop)
+            .map(|(_, c)| c.abs())
+            .collect();
+    let steer: Vec<(f64, f64)> = tr
+        .steering
+        .iter()
+        .copied()
+        .filter(|(t, _)| *t <= stop)
+        .collect();
+    let j = jitter_stats(&steer, unit);
+    WindowMetrics {
+        until_s: stop,
+        cte_avg: (!e.is_empty()).then(|| e.iter().sum::<f64>() / e.len() as f64),
+        cte_max: e.iter().copied().reduce(f64::max),
+        jitter_avg: j.map(|j| j.0),
+        jitter_max: j.map(|j| j.1),
+        jitter_std: j.map(|j| j.2),
+    }
+}
+
+/// The trajectory metrics of a part of a run ([`window_until`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WindowMetrics {
+    /// Where the part ends, seconds.
+    pub until_s: f64,
+    /// Mean |CTE|.
+    pub cte_avg: Option<f64>,
+    /// Max |CTE|.
+    pub cte_max: Option<f64>,
+    /// Mean jitter.
+    pub jitter_avg: Option<f64>,
+    /// Max jitter.
+    pub jitter_max: Option<f64>,
+    /// Jitter standard deviation.
+    pub jitter_std: Option<f64>,
 }
 
 /// The pose at time t (linear between samples, clamped at the ends).
@@ -144,7 +213,7 @@ fn objects_in_map(d: &RunData, t: f64, objs: &[[f64; 2]]) -> Vec<[f64; 2]> {
 
 /// The condition segments of a run: (start, end, condition), contiguous, covering [0, end];
 /// segments shorter than `min_s` are merged into the next one.
-fn segments(d: &RunData, min_s: f64) -> Vec<(f64, f64, Condition)> {
+pub(crate) fn segments(d: &RunData, min_s: f64) -> Vec<(f64, f64, Condition)> {
     let end = d.end.max(d.poses.last().map_or(0.0, |p| p.t));
     let mut segs: Vec<(f64, f64, Condition)> = Vec::new();
     if d.events.is_empty() {
@@ -203,16 +272,13 @@ fn failure(
         candidates.push((t, Failure::Takeover));
     }
     if let Some(route) = route
-        && let Some(i) = tr
-            .proj
-            .iter()
-            .position(|p| p.offset.abs() > cfg.cte_threshold)
+        && let Some(i) = tr.cte.iter().position(|c| c.abs() > cfg.cte_threshold)
     {
         let p = tr.proj[i];
         let k = route.curvature_at(p.s, cfg.curvature_window_m);
         let kind = if k.abs() < cfg.turn_curvature {
             Failure::RoadDeparture
-        } else if k.signum() == p.offset.signum() {
+        } else if k.signum() == tr.cte[i].signum() {
             Failure::Oversteer
         } else {
             Failure::Understeer
@@ -220,6 +286,7 @@ fn failure(
         candidates.push((d.poses[i].t, kind));
     }
     if let Some(limit) = cfg.timeout_s
+        && route.is_some()
         && goal.is_none_or(|g| g > limit)
         && d.end > limit
     {
@@ -280,7 +347,14 @@ fn window_metrics(
         .filter(|&i| inside(d.poses[i].t))
         .collect();
     let last_i = d.poses.partition_point(|p| p.t <= b).saturating_sub(1);
-    let completion = route.map(|r| (tr.reached[last_i] / r.length()).clamp(0.0, 1.0));
+    // A run that reached the goal (within the goal tolerance of the end) completed the route.
+    let completion = route.map(|r| {
+        if tr.reached[last_i] >= r.length() - cfg.goal_tolerance_m {
+            1.0
+        } else {
+            (tr.reached[last_i] / r.length()).clamp(0.0, 1.0)
+        }
+    });
     // CTE over the valid part.
     let (mut cte_avg, mut cte_max) = (None, None);
     if route.is_some() && !idx.is_empty() {
@@ -295,7 +369,7 @@ fn window_metrics(
             ok = long_enough && completion.is_some_and(|c| c >= cfg.cte_min_completion);
         }
         if ok && !valid.is_empty() {
-            let e: Vec<f64> = valid.iter().map(|&i| tr.proj[i].offset.abs()).collect();
+            let e: Vec<f64> = valid.iter().map(|&i| tr.cte[i].abs()).collect();
             cte_avg = Some(e.iter().sum::<f64>() / e.len() as f64);
             cte_max = Some(e.iter().copied().fold(0.0, f64::max));
         }
@@ -329,6 +403,8 @@ fn window_metrics(
         (expected > 0).then(|| seen as f64 / expected as f64)
     });
     Metrics {
+        outcome: Outcome::Unjudged,
+        unjudged_reason: None,
         completion,
         failure: fail.map(|f| f.1),
         cte_avg,
@@ -341,14 +417,66 @@ fn window_metrics(
     }
 }
 
-/// Analyses one run: failure, run metrics and segment metrics.
+/// Sets the outcome of `m`: failed with a failure, ok when the run could be judged, unjudged
+/// (with the reason) otherwise.
+fn judge(m: &mut Metrics, unjudged: &Option<String>) {
+    (m.outcome, m.unjudged_reason) = match (m.failure, unjudged) {
+        (Some(_), _) => (Outcome::Failed, None),
+        (None, None) => (Outcome::Ok, None),
+        (None, Some(why)) => (Outcome::Unjudged, Some(why.clone())),
+    };
+}
+
+/// Analyses one run: trimming to the route, failure, run metrics and segment metrics.
 pub fn analyze_run(d: &RunData, cfg: &AnalyzeConfig, vehicles: Option<&[[f64; 2]]>) -> RunResult {
-    let route = cfg.route.as_ref();
-    let tr = track(route, &d.poses);
+    let mut route = cfg.route.as_ref();
+    let region = cfg
+        .reference
+        .as_ref()
+        .filter(|_| cfg.cte_to == CteTo::Region);
+    // Why failures cannot be judged, if they cannot.
+    let mut unjudged: Option<String> = match (route, &cfg.pose) {
+        (_, None) => Some(
+            "no pose topic (--pose-topic): completion and lane or road departures cannot be judged"
+                .into(),
+        ),
+        (None, _) => Some(
+            "no route (--route or --reference-runs): completion and lane or road departures cannot be judged"
+                .into(),
+        ),
+        _ => None,
+    };
+    let mut trimmed = None;
+    let mut trim_note = None;
+    let owned;
+    let d = match route {
+        Some(r) if cfg.trim_to_route && !d.poses.is_empty() => {
+            match window(d, r, cfg.goal_tolerance_m, cfg.cte_threshold) {
+                Window::On { start, end, note } => {
+                    trim_note = note;
+                    if start > 0.0 || end < d.end {
+                        trimmed = Some([start, end]);
+                        owned = cut(d, start, end);
+                        &owned
+                    } else {
+                        d
+                    }
+                }
+                Window::Off(why) => {
+                    unjudged = Some(why);
+                    route = None;
+                    d
+                }
+            }
+        }
+        _ => d,
+    };
+    let tr = track(route, region, &d.poses);
     let fail = failure(d, &tr, route, cfg);
     let end = d.end.max(d.poses.last().map_or(0.0, |p| p.t));
     let segs = segments(d, cfg.min_segment_s);
-    let metrics = window_metrics(d, &tr, route, cfg, vehicles, 0.0, end, fail, true);
+    let mut metrics = window_metrics(d, &tr, route, cfg, vehicles, 0.0, end, fail, true);
+    judge(&mut metrics, &unjudged);
     let mut segments = Vec::new();
     for (k, (a, b, c)) in segs.iter().enumerate() {
         if fail.is_some_and(|(t, _)| t < *a) {
@@ -356,7 +484,8 @@ pub fn analyze_run(d: &RunData, cfg: &AnalyzeConfig, vehicles: Option<&[[f64; 2]
         }
         let last = k + 1 == segs.len();
         let in_seg = fail.filter(|(t, _)| *t >= *a && (*t < *b || last));
-        let m = window_metrics(d, &tr, route, cfg, vehicles, *a, *b, in_seg, last);
+        let mut m = window_metrics(d, &tr, route, cfg, vehicles, *a, *b, in_seg, last);
+        judge(&mut m, &unjudged);
         let first_i = d
             .poses
             .partition_point(|p| p.t < *a)
@@ -391,7 +520,22 @@ pub fn analyze_run(d: &RunData, cfg: &AnalyzeConfig, vehicles: Option<&[[f64; 2]
         .take_while(|p| fail.is_none_or(|(t, _)| p.t <= t))
         .map(|p| (p.p, cond_at(p.t)))
         .collect();
+    let stop = fail.map_or(end, |f| f.0);
+    let n = d.poses.partition_point(|p| p.t <= stop);
+    let run_track = RunTrack {
+        t: d.poses[..n].iter().map(|p| p.t).collect(),
+        reached: tr.reached.iter().take(n).copied().collect(),
+        cte: tr.cte.iter().take(n).copied().collect(),
+        steering: d
+            .steering
+            .iter()
+            .copied()
+            .filter(|(t, _)| *t <= stop)
+            .collect(),
+        end: stop,
+    };
     let mut notes = d.notes.clone();
+    notes.extend(trim_note);
     if cfg.objects.is_some() && vehicles.is_none() {
         notes.push(
             "no coverage: no known vehicles (give --vehicles, or record nominal runs with detections)"
@@ -408,9 +552,11 @@ pub fn analyze_run(d: &RunData, cfg: &AnalyzeConfig, vehicles: Option<&[[f64; 2]
         failure_position: fail
             .filter(|_| !d.poses.is_empty())
             .map(|(t, _)| pose_at(&d.poses, t).0),
+        trimmed,
         notes,
         segments,
         trajectory,
+        track: run_track,
     }
 }
 

@@ -11,23 +11,32 @@
 //! `docs/study.md`; [`AnalyzeConfig`]'s fields carry the defaults.
 
 mod aggregate;
+mod events;
 mod load;
 mod metrics;
+pub mod reference;
 mod render;
+mod trim;
 
 pub use aggregate::{
     Aggregated, ConditionRow, PerturbationRow, aggregate, aggregate_conditions,
     aggregate_perturbations,
 };
-pub use load::{RunData, load_run};
-pub use metrics::{analyze_run, jitter_stats};
-pub use render::{render_conditions, render_perturbations, render_runs, render_segments};
+pub use events::{ExternalEvents, load_events_bags};
+pub use load::{PoseSample, RunData, load_run};
+pub use metrics::{RunTrack, WindowMetrics, analyze_run, jitter_stats, window_until};
+pub use reference::ReferenceRegion;
+pub use render::{
+    outcome_letter, render_conditions, render_perturbations, render_runs, render_segments,
+    render_summary,
+};
 
 use crate::error::StudyError;
 use crate::route::Route;
-use crate::source::{RunEntry, find_runs};
+use crate::source::{RunEntry, Skipped, find_runs};
 use serde::Serialize;
 use std::path::Path;
+use std::sync::Arc;
 
 /// A topic and, optionally, the path of the field to read in its messages.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -70,8 +79,24 @@ pub enum Aggregate {
     /// Only runs (segments) that did not fail, as the paper's RQ3 table.
     #[default]
     NonFailing,
-    /// Every run, failing ones over their part before the failure, as the paper's RQ4 table.
+    /// Every run, failing ones over their part before the failure.
     All,
+    /// Every run over the shared non-failing portion: the part of the route that every run of
+    /// the row drove before failing (less the --cte-exclude metres before the earliest failure),
+    /// the paper's RQ4 comparison; `analyze compare` only.
+    Shared,
+}
+
+/// What the cross-track error is measured against.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CteTo {
+    /// The reference region of nominal drives when one is given (the paper's), the route
+    /// otherwise.
+    #[default]
+    Region,
+    /// The route polyline, even with a reference region.
+    Route,
 }
 
 /// What the steering jitter is measured per.
@@ -88,8 +113,16 @@ pub enum JitterUnit {
 /// Everything `perturb analyze` needs to know.
 #[derive(Clone, Debug)]
 pub struct AnalyzeConfig {
-    /// The reference route (None: no completion, CTE or departure).
+    /// The reference route (None: no completion, CTE or departure, unless a reference region
+    /// gives one).
     pub route: Option<Route>,
+    /// The reference region of nominal drives (the paper's CTE); see [`reference`].
+    pub reference: Option<ReferenceRegion>,
+    /// What the CTE is measured against.
+    pub cte_to: CteTo,
+    /// Start each run where the vehicle first comes within the goal tolerance of the route's
+    /// start and end it at the goal (on by default; only with a route).
+    pub trim_to_route: bool,
     /// The pose topic (geometry_msgs/PoseStamped, nav_msgs/Odometry, ... ) and the path of its
     /// position (x and y are read below it; None: found by message type). Without it only the
     /// metrics that need no position are computed (duration, jitter, segments).
@@ -106,8 +139,18 @@ pub struct AnalyzeConfig {
     pub takeover: Option<TopicField>,
     /// Collision signal, same rule.
     pub collision: Option<TopicField>,
+    /// With a value, the takeover signal fires at the first message whose field equals it
+    /// (numbers compared as numbers) after a message where it did not: e.g. `0` for a drive
+    /// mode that turns manual.
+    pub takeover_value: Option<String>,
+    /// The same for the collision signal.
+    pub collision_value: Option<String>,
     /// The perturbation events channel.
     pub events_topic: String,
+    /// Perturbation events recorded apart from the runs (by `perturb-bridge record` while the
+    /// vehicle's topics went to `rosbag record`), matched to each run by log time; used for a
+    /// run whose bag has no events topic.
+    pub external_events: Option<Arc<ExternalEvents>>,
     /// Only events of these sensor topics decide the condition (all when empty).
     pub event_streams: Vec<String>,
     /// Lateral distance to the route beyond which the run has left its lane or the road, metres.
@@ -149,13 +192,19 @@ impl Default for AnalyzeConfig {
     fn default() -> Self {
         AnalyzeConfig {
             route: None,
+            reference: None,
+            cte_to: CteTo::Region,
+            trim_to_route: true,
             pose: None,
             steering: None,
             objects: None,
             vehicles: None,
             takeover: None,
             collision: None,
+            takeover_value: None,
+            collision_value: None,
             events_topic: perturb_bag::events::EVENTS_TOPIC.to_string(),
+            external_events: None,
             event_streams: Vec::new(),
             cte_threshold: 2.0,
             cte_exclude_m: 5.0,
@@ -227,6 +276,31 @@ impl Failure {
     }
 }
 
+/// The judgement of a run or segment.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    /// Judged and did not fail.
+    Ok,
+    /// Failed (the failure type says how).
+    Failed,
+    /// Whether it failed cannot be told (no route, no pose, never on the route); the reason is
+    /// given beside it. Never counted as ok.
+    #[default]
+    Unjudged,
+}
+
+impl Outcome {
+    /// The stable name (as in JSON).
+    pub fn name(self) -> &'static str {
+        match self {
+            Outcome::Ok => "ok",
+            Outcome::Failed => "failed",
+            Outcome::Unjudged => "unjudged",
+        }
+    }
+}
+
 /// Which perturbations were active: empty for nominal, one (perturbation, severity) per stream
 /// otherwise (sorted, duplicates removed).
 #[derive(Clone, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -259,6 +333,10 @@ impl Condition {
 /// The metrics of a run or a segment. JSON field names are stable.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Metrics {
+    /// Ok, failed, or unjudged.
+    pub outcome: Outcome,
+    /// Why it is unjudged.
+    pub unjudged_reason: Option<String>,
     /// Share of the route length reached before the run (segment) ended or failed, 0..1 (None
     /// without a route).
     pub completion: Option<f64>,
@@ -324,6 +402,9 @@ pub struct RunResult {
     pub failure_time_s: Option<f64>,
     /// Where the vehicle was when it failed (pose frame).
     pub failure_position: Option<[f64; 2]>,
+    /// Where the analysed part lies in the recording, seconds from its first message (start,
+    /// end), when it was trimmed to the route.
+    pub trimmed: Option<[f64; 2]>,
     /// Remarks (messages that did not decode, missing topics that were optional, ...).
     pub notes: Vec<String>,
     /// The segments of constant condition.
@@ -332,6 +413,10 @@ pub struct RunResult {
     /// The driven trajectory (pose frame) with the condition active at each sample, for maps.
     #[serde(skip)]
     pub trajectory: Vec<([f64; 2], Condition)>,
+    /// Per pose: time, route progress and CTE; the steering commands (for the shared-portion
+    /// comparison).
+    #[serde(skip)]
+    pub track: RunTrack,
 }
 
 /// A run that could not be analysed.
@@ -343,9 +428,36 @@ pub struct RunError {
     pub error: String,
 }
 
+/// How many runs were analysed, and how they came out.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Summary {
+    /// Runs analysed.
+    pub runs: usize,
+    /// Judged and did not fail.
+    pub ok: usize,
+    /// Failed.
+    pub failed: usize,
+    /// Not judged, counted apart (never as ok).
+    pub unjudged: usize,
+    /// The reasons of the unjudged runs, with their counts.
+    pub unjudged_reasons: Vec<(String, usize)>,
+    /// Runs that could not be read or analysed.
+    pub errors: usize,
+    /// Files and folders in the runs folder that are not runs.
+    pub skipped: usize,
+    /// The failure checks that ran (e.g. `departure`, `collision`): a failure of another kind
+    /// cannot have been seen.
+    pub checks: Vec<String>,
+    /// What the CTE was measured against: `reference region (N nominal drives)`, `route` or
+    /// `none`.
+    pub cte_reference: String,
+}
+
 /// Everything `perturb analyze` computed.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Analysis {
+    /// Counts of ok, failed and unjudged runs, errors and skipped files; the checks that ran.
+    pub summary: Summary,
     /// One row per run.
     pub runs: Vec<RunResult>,
     /// One row per segment of constant condition (a run without switches has one).
@@ -356,14 +468,26 @@ pub struct Analysis {
     pub perturbations: Vec<PerturbationRow>,
     /// Runs that could not be analysed.
     pub errors: Vec<RunError>,
+    /// Files and folders of the runs folder that are not runs.
+    pub skipped: Vec<Skipped>,
+    /// The route the runs were judged against (given, or the centre line of the reference
+    /// drives), for maps.
+    #[serde(skip)]
+    pub route: Option<Route>,
+    /// The reference region, for maps.
+    #[serde(skip)]
+    pub reference: Option<ReferenceRegion>,
 }
 
 /// Analyses every run in `runs_dir` (see [`find_runs`]); a run that cannot be analysed is
 /// reported in [`Analysis::errors`] and the others are still analysed. Runs are read in
 /// parallel on the current rayon pool.
 pub fn analyze_dir(runs_dir: &Path, cfg: &AnalyzeConfig) -> crate::Result<Analysis> {
-    let runs = find_runs(runs_dir)?;
-    Ok(analyze_entries(&runs, cfg))
+    let found = find_runs(runs_dir)?;
+    let mut a = analyze_entries(&found.runs, cfg);
+    a.skipped = found.skipped;
+    a.summary.skipped = a.skipped.len();
+    Ok(a)
 }
 
 /// Analyses the given runs (see [`analyze_dir`]).
@@ -397,11 +521,178 @@ pub fn analyze_entries(runs: &[RunEntry], cfg: &AnalyzeConfig) -> Analysis {
         .collect();
     let conditions = aggregate_conditions(&segments, cfg.aggregate);
     let perturbations = aggregate_perturbations(&segments, cfg.aggregate);
+    let summary = summarize(&results, errors.len(), cfg);
     Analysis {
+        summary,
         runs: results,
         segments,
         conditions,
         perturbations,
         errors,
+        skipped: Vec::new(),
+        route: cfg.route.clone(),
+        reference: cfg.reference.clone(),
     }
+}
+
+/// The failure checks a configuration runs.
+pub fn checks(cfg: &AnalyzeConfig) -> Vec<String> {
+    let mut v = Vec::new();
+    if cfg.route.is_some() && cfg.pose.is_some() {
+        v.extend(["departure", "erratic_start", "incomplete"].map(String::from));
+        if cfg.timeout_s.is_some() {
+            v.push("timeout".into());
+        }
+    }
+    if cfg.collision.is_some() {
+        v.push("collision".into());
+    }
+    if cfg.takeover.is_some() {
+        v.push("takeover".into());
+    }
+    v
+}
+
+fn summarize(runs: &[RunResult], errors: usize, cfg: &AnalyzeConfig) -> Summary {
+    let count = |o: Outcome| runs.iter().filter(|r| r.metrics.outcome == o).count();
+    let mut reasons: Vec<(String, usize)> = Vec::new();
+    for r in runs {
+        if let Some(why) = &r.metrics.unjudged_reason {
+            match reasons.iter_mut().find(|(w, _)| w == why) {
+                Some(e) => e.1 += 1,
+                None => reasons.push((why.clone(), 1)),
+            }
+        }
+    }
+    let cte_reference = match (&cfg.reference, cfg.cte_to, &cfg.route) {
+        (Some(r), CteTo::Region, _) => format!(
+            "reference region ({} nominal drive{})",
+            r.runs.len(),
+            if r.runs.len() == 1 { "" } else { "s" }
+        ),
+        (_, _, Some(_)) => "route".into(),
+        _ => "none".into(),
+    };
+    Summary {
+        runs: runs.len(),
+        ok: count(Outcome::Ok),
+        failed: count(Outcome::Failed),
+        unjudged: count(Outcome::Unjudged),
+        unjudged_reasons: reasons,
+        errors,
+        skipped: 0,
+        checks: checks(cfg),
+        cte_reference,
+    }
+}
+
+/// The route and reference region built from nominal drives (see [`reference`]).
+#[derive(Clone, Debug)]
+pub struct ReferenceSet {
+    /// The route: the one given, or the centre line of the drives.
+    pub route: Route,
+    /// True when the route is the drives' centre line.
+    pub derived_route: bool,
+    /// The band the drives span.
+    pub region: ReferenceRegion,
+    /// Remarks (drives left out, parts that were not nominal).
+    pub notes: Vec<String>,
+}
+
+/// Builds the paper's reference region from the nominal drives in `dir` (read with `cfg`'s pose
+/// topic; `cfg.route` is the route, or None to take the drives' centre line), every `bin_m`
+/// metres. A drive's perturbed parts are left out (only nominal driving spans the region); each
+/// drive is trimmed to the route like a run when `cfg.trim_to_route`.
+pub fn reference_from_runs(
+    dir: &Path,
+    cfg: &AnalyzeConfig,
+    bin_m: f64,
+) -> crate::Result<ReferenceSet> {
+    if cfg.pose.is_none() {
+        return Err(StudyError::Config(
+            "reference runs need a pose topic (--pose-topic)".into(),
+        ));
+    }
+    let found = find_runs(dir)?;
+    let read_cfg = AnalyzeConfig {
+        route: None,
+        steering: None,
+        objects: None,
+        takeover: None,
+        collision: None,
+        ..cfg.clone()
+    };
+    let mut notes = Vec::new();
+    let mut drives: Vec<(String, Vec<load::PoseSample>)> = Vec::new();
+    for entry in &found.runs {
+        let d = load_run(entry, &read_cfg).map_err(|e| StudyError::Run {
+            run: format!("reference {}", entry.name),
+            reason: e.to_string(),
+        })?;
+        let segs = metrics::segments(&d, cfg.min_segment_s);
+        let nominal = |t: f64| {
+            segs.iter()
+                .any(|(a, b, c)| c.is_nominal() && t >= *a && t <= *b)
+        };
+        let poses: Vec<load::PoseSample> =
+            d.poses.iter().copied().filter(|p| nominal(p.t)).collect();
+        if poses.len() < d.poses.len() {
+            notes.push(format!(
+                "reference drive `{}`: {} of {} poses under a perturbation left out",
+                entry.name,
+                d.poses.len() - poses.len(),
+                d.poses.len()
+            ));
+        }
+        if poses.len() < 2 {
+            notes.push(format!(
+                "reference drive `{}` has no nominal driving: not used",
+                entry.name
+            ));
+            continue;
+        }
+        drives.push((entry.name.clone(), poses));
+    }
+    let xy = |drives: &[(String, Vec<load::PoseSample>)]| -> Vec<(String, Vec<[f64; 2]>)> {
+        drives
+            .iter()
+            .map(|(n, p)| (n.clone(), reference::positions(p)))
+            .collect()
+    };
+    let (route, derived_route) = match &cfg.route {
+        Some(r) => (r.clone(), false),
+        None => (
+            reference::centre_line(&xy(&drives), bin_m).ok_or_else(|| {
+                StudyError::input(dir, "holds no nominal drive to take a centre line from")
+            })?,
+            true,
+        ),
+    };
+    if cfg.trim_to_route {
+        for (name, poses) in &mut drives {
+            let d = RunData {
+                end: poses.last().map_or(0.0, |p| p.t),
+                poses: poses.clone(),
+                ..RunData::default()
+            };
+            match trim::window(&d, &route, cfg.goal_tolerance_m, cfg.cte_threshold) {
+                trim::Window::On { start, end, .. } => {
+                    poses.retain(|p| p.t >= start && p.t <= end);
+                }
+                trim::Window::Off(why) => {
+                    notes.push(format!("reference drive `{name}`: {why}; not used"));
+                    poses.clear();
+                }
+            }
+        }
+        drives.retain(|(_, p)| !p.is_empty());
+    }
+    let region = ReferenceRegion::build(&route, &xy(&drives), bin_m)
+        .ok_or_else(|| StudyError::input(dir, "holds no usable nominal drive"))?;
+    Ok(ReferenceSet {
+        route,
+        derived_route,
+        region,
+        notes,
+    })
 }

@@ -2,7 +2,9 @@
 //! perturbation (the paper's layout).
 
 use super::aggregate::Aggregated;
-use super::{ConditionRow, Failure, Metrics, PerturbationRow, RunResult, SegmentResult};
+use super::{
+    ConditionRow, Failure, Metrics, Outcome, PerturbationRow, RunResult, SegmentResult, Summary,
+};
 use crate::Format;
 use crate::table::{Table, num, raw};
 
@@ -18,7 +20,8 @@ fn sev(s: Option<u8>) -> String {
     s.map_or("-".into(), |s| s.to_string())
 }
 
-const METRIC_COLUMNS: [(&str, bool); 9] = [
+const METRIC_COLUMNS: [(&str, bool); 10] = [
+    ("outcome", false),
     ("completion", true),
     ("failure", false),
     ("cte_avg", true),
@@ -33,6 +36,7 @@ const METRIC_COLUMNS: [(&str, bool); 9] = [
 fn metric_cells(m: &Metrics, csv: bool) -> Vec<String> {
     let f = |v: Option<f64>, d: usize| if csv { raw(v) } else { num(v, d) };
     vec![
+        m.outcome.name().to_string(),
         f(m.completion, 3),
         failure(m.failure, csv),
         f(m.cte_avg, 3),
@@ -95,6 +99,16 @@ pub fn render_segments(segments: &[SegmentResult], format: Format) -> String {
     t.render(format)
 }
 
+/// The letter of an outcome in the paper's `[C,ok,...]` lists: the failure's letter, `ok`, or
+/// `?` for a run that was not judged.
+pub fn outcome_letter(o: Outcome, f: Option<Failure>) -> &'static str {
+    match (o, f) {
+        (_, Some(f)) => f.letter(),
+        (Outcome::Unjudged, None) => "?",
+        _ => "ok",
+    }
+}
+
 /// Completions and outcomes per run, e.g. `45% C, 100% ✓`.
 fn outcomes(a: &Aggregated, csv: bool) -> (String, String) {
     let comp: Vec<String> = a
@@ -103,9 +117,10 @@ fn outcomes(a: &Aggregated, csv: bool) -> (String, String) {
         .map(|c| c.map_or("-".into(), |c| format!("{:.0}%", c * 100.0)))
         .collect();
     let fails: Vec<String> = a
-        .failures
+        .outcomes
         .iter()
-        .map(|f| f.map_or("ok".to_string(), |f| f.letter().to_string()))
+        .zip(&a.failures)
+        .map(|(o, f)| outcome_letter(*o, *f).to_string())
         .collect();
     if csv {
         (comp.join(";"), fails.join(";"))
@@ -119,9 +134,10 @@ fn aggregated_cells(a: &Aggregated, csv: bool) -> Vec<String> {
     let (comp, fails) = outcomes(a, csv);
     vec![
         a.runs.to_string(),
+        a.unjudged.to_string(),
         comp,
         fails,
-        f(Some(a.failure_rate), 2),
+        f(a.failure_rate, 2),
         f(a.cte_avg, 2),
         f(a.cte_max, 2),
         f(a.jitter_avg, 3),
@@ -131,8 +147,9 @@ fn aggregated_cells(a: &Aggregated, csv: bool) -> Vec<String> {
     ]
 }
 
-const AGG_COLUMNS: [(&str, bool); 10] = [
+const AGG_COLUMNS: [(&str, bool); 11] = [
     ("runs", true),
+    ("unjudged", true),
     ("completion", false),
     ("failures", false),
     ("failure_rate", true),
@@ -186,4 +203,40 @@ pub fn render_perturbations(rows: &[PerturbationRow], format: Format) -> String 
         t.push(row);
     }
     t.render(format)
+}
+
+/// The summary as lines of text: counts of ok, failed and unjudged runs (with the reasons),
+/// errors and skipped files, the checks that ran and the CTE's reference.
+pub fn render_summary(s: &Summary) -> String {
+    let mut out = format!(
+        "{} run{} analysed: {} ok, {} failed, {} unjudged",
+        s.runs,
+        if s.runs == 1 { "" } else { "s" },
+        s.ok,
+        s.failed,
+        s.unjudged
+    );
+    if s.errors > 0 {
+        out.push_str(&format!("; {} could not be read", s.errors));
+    }
+    if s.skipped > 0 {
+        out.push_str(&format!(
+            "; {} file(s) or folder(s) skipped (not runs)",
+            s.skipped
+        ));
+    }
+    out.push('\n');
+    for (why, n) in &s.unjudged_reasons {
+        out.push_str(&format!("  unjudged ({n}): {why}\n"));
+    }
+    out.push_str(&format!(
+        "failure checks: {}; CTE against: {}\n",
+        if s.checks.is_empty() {
+            "none".to_string()
+        } else {
+            s.checks.join(", ")
+        },
+        s.cte_reference
+    ));
+    out
 }

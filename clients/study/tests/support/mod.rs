@@ -7,8 +7,9 @@
 #![allow(dead_code)]
 
 use perturb_bag::dynamic::{MessageCodec, Value};
-use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string};
-use perturb_bag::{BagWriter, WriterOptions};
+use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent};
+use perturb_bag::ros1::{Ros1Writer, Ros1WriterOptions};
+use perturb_bag::{BagWriter, Compression, WriterOptions};
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -156,7 +157,7 @@ pub const OBJECTS_SHIFT: f64 = 0.07;
 
 type F1 = Box<dyn Fn(f64) -> f64>;
 /// The condition at a time.
-type CondFn = Box<dyn Fn(f64) -> Option<(&'static str, u8)>>;
+pub type CondFn = Box<dyn Fn(f64) -> Option<(&'static str, u8)>>;
 /// Objects in the vehicle frame for message k at time t, the vehicle at a position.
 type ObjectsFn = Box<dyn Fn(usize, f64, [f64; 2]) -> Vec<[f64; 2]>>;
 
@@ -233,19 +234,42 @@ impl Run {
             .collect()
     }
 
-    /// Writes the bag under `dir`; returns its path and the last log time (s from T0).
+    /// Writes the bag under `dir` as a rosbag2 folder; returns its path and the last log time
+    /// (s from T0).
     pub fn write(&self, dir: &Path) -> (PathBuf, f64) {
-        let path = dir.join(&self.name);
-        let mut w = BagWriter::create(&path, &WriterOptions::default()).unwrap();
+        self.write_as(dir, Layout::Rosbag2)
+    }
+
+    /// Writes the bag under `dir` in `layout`; returns its path and the last log time (s from
+    /// T0).
+    pub fn write_as(&self, dir: &Path, layout: Layout) -> (PathBuf, f64) {
+        let ros1 = layout == Layout::Ros1Bag;
+        let mut w = match layout {
+            Layout::Rosbag2 => Writer::Ros2(Box::new(
+                BagWriter::create(&dir.join(&self.name), &WriterOptions::default()).unwrap(),
+            )),
+            Layout::McapFile => Writer::Ros2(Box::new(
+                BagWriter::create(
+                    &dir.join(format!(".{}.tmp", self.name)),
+                    &WriterOptions {
+                        compression: Compression::None,
+                        ..WriterOptions::default()
+                    },
+                )
+                .unwrap(),
+            )),
+            Layout::Ros1Bag => Writer::Ros1(Box::new(
+                Ros1Writer::create(
+                    &dir.join(format!("{}.bag", self.name)),
+                    &Ros1WriterOptions::default(),
+                )
+                .unwrap(),
+            )),
+        };
         let mut codecs: BTreeMap<u16, MessageCodec> = BTreeMap::new();
-        let mut add = |w: &mut BagWriter, topic: &str, ty: &str, schema: &str| {
-            let id = w
-                .add_topic_with_schema(topic, ty, "ros2msg", schema.as_bytes(), BTreeMap::new())
-                .unwrap();
-            codecs.insert(
-                id,
-                MessageCodec::new(ty, "ros2msg", schema.as_bytes(), "cdr").unwrap(),
-            );
+        let mut add = |w: &mut Writer, topic: &str, ty: &str, schema: &str| {
+            let (id, codec) = w.add(topic, ty, schema);
+            codecs.insert(id, codec);
             id
         };
         let pose_ch = (!self.no_pose).then(|| {
@@ -282,7 +306,7 @@ impl Run {
         let ev_ch = self
             .cond
             .as_ref()
-            .map(|_| w.add_topic(EVENTS_TOPIC, EVENTS_TYPE).unwrap());
+            .map(|_| add(&mut w, EVENTS_TOPIC, EVENTS_TYPE, "string data\n"));
         // Every message, then written in time order.
         let mut msgs: Vec<(f64, u16, Vec<u8>)> = Vec::new();
         let stamp = |t: f64| {
@@ -302,23 +326,28 @@ impl Run {
                 let p = self.position(t);
                 let yaw = route_heading((self.s_of_t)(t));
                 let (sec, nsec) = stamp(t);
-                let bytes = codecs[&ch]
-                    .encode_fields(&[
-                        ("header.stamp.sec", sec),
-                        ("header.stamp.nanosec", nsec),
-                        ("header.frame_id", Value::String("map".into())),
-                        (&format!("{prefix}.position.x"), Value::Float(p[0])),
-                        (&format!("{prefix}.position.y"), Value::Float(p[1])),
-                        (
-                            &format!("{prefix}.orientation.z"),
-                            Value::Float((yaw / 2.0).sin()),
-                        ),
-                        (
-                            &format!("{prefix}.orientation.w"),
-                            Value::Float((yaw / 2.0).cos()),
-                        ),
-                    ])
-                    .unwrap();
+                let mut fields = vec![
+                    (format!("{prefix}.position.x"), Value::Float(p[0])),
+                    (format!("{prefix}.position.y"), Value::Float(p[1])),
+                    (
+                        format!("{prefix}.orientation.z"),
+                        Value::Float((yaw / 2.0).sin()),
+                    ),
+                    (
+                        format!("{prefix}.orientation.w"),
+                        Value::Float((yaw / 2.0).cos()),
+                    ),
+                ];
+                if !ros1 {
+                    fields.push(("header.stamp.sec".into(), sec));
+                    fields.push(("header.stamp.nanosec".into(), nsec));
+                    fields.push(("header.frame_id".into(), Value::String("map".into())));
+                }
+                let refs: Vec<(&str, Value)> = fields
+                    .iter()
+                    .map(|(k, v)| (k.as_str(), v.clone()))
+                    .collect();
+                let bytes = codecs[&ch].encode_fields(&refs).unwrap();
                 msgs.push((t, ch, bytes));
             }
         }
@@ -364,36 +393,162 @@ impl Run {
             }
         }
         if let (Some(ch), Some(cond)) = (ev_ch, &self.cond) {
-            for k in 0.. {
-                let t = k as f64 / 10.0;
-                if t > self.duration {
-                    break;
-                }
-                let c = cond(t);
-                let ev = PerturbationEvent {
-                    topic: "/camera/image".into(),
-                    stream: Some("camera".into()),
-                    seq: k,
-                    stamp_sec: 0,
-                    stamp_nanosec: 0,
-                    frame_id: "camera".into(),
-                    id: c.map(|c| c.0.to_string()),
-                    severity: c.map(|c| c.1),
-                    seed: c.map(|_| 1),
-                };
-                let json = serde_json::to_string(&ev).unwrap();
-                msgs.push((t, ch, encode_string(&json)));
+            for (t, json) in self.events(cond) {
+                let b = codecs[&ch]
+                    .encode_fields(&[("data", Value::String(json))])
+                    .unwrap();
+                msgs.push((t, ch, b));
             }
         }
         msgs.sort_by(|a, b| a.0.total_cmp(&b.0));
         let last = msgs.last().map_or(0.0, |m| m.0);
         for (t, ch, bytes) in &msgs {
             let ns = T0 + (t * 1e9).round() as u64;
-            w.write(*ch, ns, ns, bytes).unwrap();
+            w.write(*ch, ns, bytes);
         }
-        w.finish().unwrap();
+        let path = w.finish();
+        let path = match layout {
+            Layout::McapFile => {
+                let file = dir.join(format!("{}.mcap", self.name));
+                let inner = std::fs::read_dir(&path)
+                    .unwrap()
+                    .flatten()
+                    .map(|e| e.path())
+                    .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+                    .unwrap();
+                std::fs::rename(inner, &file).unwrap();
+                std::fs::remove_dir_all(&path).unwrap();
+                file
+            }
+            _ => path,
+        };
         (path, last)
     }
+
+    /// The perturbation events (t, JSON), one per 0.1 s, as perturbd writes them.
+    pub fn events(&self, cond: &CondFn) -> Vec<(f64, String)> {
+        let mut out = Vec::new();
+        for k in 0.. {
+            let t = k as f64 / 10.0;
+            if t > self.duration {
+                break;
+            }
+            let c = cond(t);
+            let ev = PerturbationEvent {
+                topic: "/camera/image".into(),
+                stream: Some("camera".into()),
+                seq: k,
+                stamp_sec: 0,
+                stamp_nanosec: 0,
+                frame_id: "camera".into(),
+                id: c.map(|c| c.0.to_string()),
+                severity: c.map(|c| c.1),
+                seed: c.map(|_| 1),
+            };
+            out.push((t, serde_json::to_string(&ev).unwrap()));
+        }
+        out
+    }
+}
+
+/// How a run is written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// A rosbag2 folder (`NAME/NAME_0.mcap` and `metadata.yaml`).
+    Rosbag2,
+    /// One MCAP file, `NAME.mcap` (uncompressed, as `ros2 bag record` writes by default; one
+    /// chunk for a short run).
+    McapFile,
+    /// A ROS 1 bag, `NAME.bag` (uncompressed 768 KiB chunks as `rosbag record` writes them:
+    /// one chunk for a short run).
+    Ros1Bag,
+}
+
+/// The ROS 1 form of a ros2msg definition: `std_msgs/Header` with `seq` and a ROS 1 `time`.
+fn ros1_schema(text: &str) -> String {
+    let mut out = Vec::new();
+    for part in text.split(SEP) {
+        if part.starts_with("MSG: builtin_interfaces/Time") {
+            continue;
+        }
+        if part.starts_with("MSG: std_msgs/Header") {
+            out.push("MSG: std_msgs/Header\nuint32 seq\ntime stamp\nstring frame_id\n".to_string());
+            continue;
+        }
+        out.push(part.to_string());
+    }
+    out.join(SEP)
+}
+
+/// A bag being written in either format.
+pub enum Writer {
+    /// rosbag2 (MCAP, CDR).
+    Ros2(Box<BagWriter>),
+    /// ROS 1 `.bag`.
+    Ros1(Box<Ros1Writer>),
+}
+
+impl Writer {
+    /// Adds a topic of type `ty` (ROS 2 spelling) with its ros2msg definition; returns its id
+    /// and the codec of its messages.
+    pub fn add(&mut self, topic: &str, ty: &str, schema: &str) -> (u16, MessageCodec) {
+        match self {
+            Writer::Ros2(w) => {
+                let id = w
+                    .add_topic_with_schema(topic, ty, "ros2msg", schema.as_bytes(), BTreeMap::new())
+                    .unwrap();
+                (
+                    id,
+                    MessageCodec::new(ty, "ros2msg", schema.as_bytes(), "cdr").unwrap(),
+                )
+            }
+            Writer::Ros1(w) => {
+                let ty1 = ty.replace("/msg/", "/");
+                let def = ros1_schema(schema);
+                let id = w
+                    .add_connection(
+                        topic,
+                        &ty1,
+                        "00000000000000000000000000000000",
+                        &def,
+                        None,
+                        false,
+                    )
+                    .unwrap();
+                (
+                    id,
+                    MessageCodec::new(&ty1, "ros1msg", def.as_bytes(), "ros1").unwrap(),
+                )
+            }
+        }
+    }
+
+    /// Writes one message.
+    pub fn write(&mut self, id: u16, ns: u64, bytes: &[u8]) {
+        match self {
+            Writer::Ros2(w) => w.write(id, ns, ns, bytes).unwrap(),
+            Writer::Ros1(w) => w.write(id, ns, bytes).unwrap(),
+        }
+    }
+
+    /// Finishes the bag; returns its path.
+    pub fn finish(self) -> PathBuf {
+        match self {
+            Writer::Ros2(w) => w.finish().unwrap(),
+            Writer::Ros1(w) => w.finish().unwrap(),
+        }
+    }
+}
+
+/// The time of the first pose within `tol` of the route's end (where a run trimmed to the route
+/// ends), or the last pose's time.
+pub fn goal_time(run: &Run, tol: f64) -> f64 {
+    let times = run.pose_times();
+    times
+        .iter()
+        .copied()
+        .find(|t| (run.s_of_t)(*t) >= route_length() - tol)
+        .unwrap_or(*times.last().unwrap())
 }
 
 /// A fresh scratch directory.
