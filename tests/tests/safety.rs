@@ -83,10 +83,12 @@ fn seqs(lines: &[Value]) -> Vec<u64> {
 }
 
 /// Starts the ADS side's subscribers: rospy on the camera topic and the events topic, Cyclone
-/// DDS on the LiDAR topic; returns them with their line collectors.
-fn ads_side(
+/// DDS on the LiDAR topic; returns them with their line collectors. `hash`: the subscribers
+/// print the sha256 of each frame's data.
+fn ads_side_with(
     master: &Ros1Master,
     domain: u16,
+    hash: bool,
 ) -> (Vec<Child>, Vec<std::thread::JoinHandle<Vec<Value>>>) {
     let mut children = Vec::new();
     let mut lines = Vec::new();
@@ -94,43 +96,39 @@ fn ads_side(
         ("/ads/camera", "image", "cam"),
         ("/perturb/events", "string", "ev"),
     ] {
-        let mut c = ros1_peer(
-            master,
-            &[
-                "sub",
-                "--topic",
-                topic,
-                "--type",
-                ty,
-                "--count",
-                "1000000",
-                "--timeout",
-                "120",
-                "--no-hash",
-                "--name",
-                name,
-            ],
-        );
+        let mut args = vec![
+            "sub", "--topic", topic, "--type", ty, "--count", "1000000", "--timeout", "120",
+            "--name", name,
+        ];
+        if !hash {
+            args.push("--no-hash");
+        }
+        let mut c = ros1_peer(master, &args);
         lines.push(collect_lines(ros1_ready(&mut c)));
         children.push(c);
     }
     let dom = domain.to_string();
     let mut lid = dds_peer(&[
-        "listen",
-        "--topic",
-        "/ads/lidar",
-        "--type",
-        "cloud",
-        "--count",
-        "1000000",
-        "--timeout",
-        "120",
-        "--domain",
-        &dom,
+        "listen", "--topic", "/ads/lidar", "--type", "cloud", "--count", "1000000", "--timeout",
+        "120", "--domain", &dom,
     ]);
     lines.push(collect_lines(stdout_of(&mut lid)));
     children.push(lid);
     (children, lines)
+}
+
+fn ads_side(
+    master: &Ros1Master,
+    domain: u16,
+) -> (Vec<Child>, Vec<std::thread::JoinHandle<Vec<Value>>>) {
+    ads_side_with(master, domain, false)
+}
+
+fn ads_side_hashed(
+    master: &Ros1Master,
+    domain: u16,
+) -> (Vec<Child>, Vec<std::thread::JoinHandle<Vec<Value>>>) {
+    ads_side_with(master, domain, true)
 }
 
 /// The bridge of these tests: synthetic camera (320x200, 30 Hz) and VLP-32C (10 Hz), the camera
@@ -298,4 +296,174 @@ fn the_ads_keeps_receiving_every_frame_through_a_daemon_crash_and_stall() {
         + eg_cam["fallback_raw"]["late"].as_u64().unwrap();
     assert_eq!(fallback_records, counted, "events and report agree");
     assert_eq!(recs[0]["version"], 2);
+}
+
+/// sha256 of every raw frame the bridge recorded, by (stream topic, stamp).
+fn raw_hashes(bag: &Path) -> std::collections::HashMap<(String, i64, i64), String> {
+    perturb_tests::read_bag(bag)
+        .into_iter()
+        .filter_map(|m| {
+            Some((
+                (
+                    m["topic"].as_str()?.to_string(),
+                    m["sec"].as_i64()?,
+                    m["nanosec"].as_i64()?,
+                ),
+                m["sha256"].as_str()?.to_string(),
+            ))
+        })
+        .collect()
+}
+
+fn ctl_status(ns: &Namespace) -> String {
+    let o = ns.ctl(&["status"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+#[test]
+fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
+    if !have_everything() || !perturb_tests::have_rosbags() {
+        return;
+    }
+    let ns = Namespace::new("safety-kill");
+    let master = Ros1Master::start(&ns.dir);
+    let domain = domain_of(1);
+    let daemon_cfg = ns.dir.join("perturbd.toml");
+    write(&daemon_cfg, DAEMON);
+    let rec = ns.dir.join("raw");
+    let bridge_cfg = bridge_config(
+        &ns,
+        domain,
+        &format!(
+            "\n[kill]\ntopic = \"/vehicle/takeover\"\ntransport = \"ros1\"\ndeadman_s = 1.0\n\n\
+             [record]\nout = \"{}\"\nstreams = [\"cam\", \"lid\"]\nraw = true\nperturbed = false\n",
+            rec.display()
+        ),
+    );
+    let mut daemon = ns.start_daemon(&daemon_cfg);
+    let (mut peers, lines) = ads_side_hashed(&master, domain);
+    let mut bridge = start_bridge(&ns, Some(&master), &bridge_cfg, "bridge.log");
+    std::thread::sleep(Duration::from_secs(2));
+    // The takeover topic: false for 2 s, then true (the safety driver took over).
+    let mut p1 = ros1_peer(
+        &master,
+        &[
+            "pub", "--topic", "/vehicle/takeover", "--type", "bool", "--count", "40", "--rate",
+            "10", "--switch-at", "20", "--name", "takeover",
+        ],
+    );
+    let sent = perturb_tests::ros1_lines(stdout_of(&mut p1), &mut p1);
+    let t_kill = sent[20]["t_pub_ns"].as_u64().unwrap();
+    assert_eq!(sent[20]["data"], true);
+    std::thread::sleep(Duration::from_millis(500));
+    let st = ctl_status(&ns);
+    assert!(st.contains("KILL SWITCH ENGAGED"), "{st}");
+    // A daemon restarted after a crash keeps the latch.
+    daemon.kill9();
+    let mut daemon = ns.start_daemon(&daemon_cfg);
+    let st = ctl_status(&ns);
+    assert!(st.contains("KILL SWITCH ENGAGED"), "after the restart: {st}");
+    std::thread::sleep(Duration::from_secs(1));
+    // The topic clears (false), then a person arms: perturbations resume.
+    let mut p2 = ros1_peer(
+        &master,
+        &[
+            "pub", "--topic", "/vehicle/takeover", "--type", "bool", "--count", "30", "--rate",
+            "10", "--switch-at", "1000", "--name", "clear",
+        ],
+    );
+    let p2_out = collect_lines(stdout_of(&mut p2));
+    std::thread::sleep(Duration::from_millis(1200));
+    let o = ns.ctl(&["arm"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t_arm = perturb_wire::monotonic_ns();
+    let _ = p2.wait();
+    // Its last message: the dead man engages when it goes away, a little later.
+    let t_p2_end = p2_out
+        .join()
+        .unwrap()
+        .last()
+        .and_then(|l| l["t_pub_ns"].as_u64())
+        .expect("the clearing publisher published");
+    // The clearing publisher went away: the dead man kills again.
+    assert!(
+        wait_until(Duration::from_secs(5), || ctl_status(&ns).contains("dead man")),
+        "the dead man did not engage: {}\n{}",
+        ctl_status(&ns),
+        log(&ns, "bridge.log")
+    );
+    assert!(interrupt(&mut bridge), "{}", log(&ns, "bridge.log"));
+    std::thread::sleep(Duration::from_millis(500));
+    kill_all(&mut peers);
+    let mut got = lines.into_iter().map(|h| h.join().unwrap());
+    let (cam, ev, lid) = (got.next().unwrap(), got.next().unwrap(), got.next().unwrap());
+    let _ = daemon.stop();
+    let raw = raw_hashes(&rec);
+    let is_raw = |topic: &str, f: &Value| {
+        let k = (
+            topic.to_string(),
+            f["sec"].as_i64().or(f["sec"].as_i64()).unwrap(),
+            f["nsec"].as_i64().or(f["nanosec"].as_i64()).unwrap(),
+        );
+        let r = raw.get(&k).unwrap_or_else(|| panic!("frame {k:?} not recorded raw"));
+        r == f["sha256"].as_str().unwrap()
+    };
+    let ms = 1_000_000u64;
+    for (name, topic, frames) in [
+        ("camera", "/cam/raw", &cam),
+        ("LiDAR", "/lid/raw", &lid),
+    ] {
+        let t = |f: &Value| f["t_arrival_ns"].as_u64().unwrap();
+        assert!(
+            frames.iter().filter(|f| t(f) < t_kill).all(|f| !is_raw(topic, f)),
+            "{name}: a raw frame before the kill"
+        );
+        let first_raw = frames
+            .iter()
+            .find(|f| t(f) >= t_kill && is_raw(topic, f))
+            .expect("a raw frame after the kill");
+        eprintln!(
+            "{name}: first raw frame {:.1} ms after the kill message",
+            (t(first_raw) - t_kill) as f64 / 1e6
+        );
+        assert!(t(first_raw) - t_kill < 1000 * ms, "{name}: too slow to go raw");
+        // Raw from then on until the arm, perturbed after it while the topic said false.
+        let killed: Vec<&Value> = frames
+            .iter()
+            .filter(|f| t(f) > t(first_raw) && t(f) < t_arm)
+            .collect();
+        assert!(killed.len() > 10 && killed.iter().all(|f| is_raw(topic, f)), "{name}: not raw while killed");
+        // The bridge's latch follows the daemon's within its status poll (250 ms).
+        let armed: Vec<&Value> = frames
+            .iter()
+            .filter(|f| t(f) > t_arm + 600 * ms && t(f) < t_p2_end)
+            .collect();
+        let raw_after = armed.iter().filter(|f| is_raw(topic, f)).count();
+        assert!(
+            !armed.is_empty() && raw_after == 0,
+            "{name}: {raw_after} of {} frames raw after the arm",
+            armed.len()
+        );
+    }
+    let recs = records(&ev);
+    let kinds: Vec<&str> = recs
+        .iter()
+        .filter(|r| r["kind"] == "kill" || r["kind"] == "arm")
+        .map(|r| r["kind"].as_str().unwrap())
+        .collect();
+    assert_eq!(kinds, ["kill", "arm", "kill"], "{recs:?}");
+    assert!(recs.iter().any(|r| r["reason"] == "killed" && r["applied"] == false));
+}
+
+/// Polls `f` until it holds or `timeout` passes.
+fn wait_until(timeout: Duration, mut f: impl FnMut() -> bool) -> bool {
+    let t = Instant::now();
+    while t.elapsed() < timeout {
+        if f() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    false
 }
