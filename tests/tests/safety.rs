@@ -467,3 +467,104 @@ fn wait_until(timeout: Duration, mut f: impl FnMut() -> bool) -> bool {
     }
     false
 }
+
+#[test]
+fn a_campaign_switches_steps_where_the_vehicle_is_and_the_events_carry_the_step() {
+    if !have_everything() {
+        return;
+    }
+    let ns = Namespace::new("safety-camp");
+    let master = Ros1Master::start(&ns.dir);
+    let domain = domain_of(2);
+    write(&ns.dir.join("route.csv"), "x,y\n0,0\n100,0\n200,0\n");
+    write(
+        &ns.dir.join("campaign.toml"),
+        "name = \"test drive\"\n[route]\ncsv = \"route.csv\"\n\n\
+         [[steps]]\nname = \"noise on the straight\"\nstreams = [\"cam\"]\nid = \"C-A1\"\nseverity = 2\nseed = 5\n\
+         trigger = { route = [50.0, 100.0] }\n\n\
+         [[steps]]\nname = \"beam loss in the box\"\nstreams = [\"lid\"]\nid = \"L-B1\"\nseverity = 1\nseed = 5\n\
+         trigger = { geofence = [[120.0, -5.0], [140.0, -5.0], [140.0, 5.0], [120.0, 5.0]] }\n",
+    );
+    let daemon_cfg = ns.dir.join("perturbd.toml");
+    write(
+        &daemon_cfg,
+        "[daemon]\ncampaign = \"campaign.toml\"\n\n\
+         [[streams]]\nname = \"cam\"\nmodality = \"camera\"\n\n\
+         [[streams]]\nname = \"lid\"\nmodality = \"lidar\"\nsensor = \"vlp32c\"\n",
+    );
+    let bridge_cfg = bridge_config(
+        &ns,
+        domain,
+        "\n[pose]\ntopic = \"/localization/current_pose\"\ntransport = \"ros1\"\n",
+    );
+    let mut daemon = ns.start_daemon(&daemon_cfg);
+    let (mut peers, lines) = ads_side(&master, domain);
+    let mut bridge = start_bridge(&ns, Some(&master), &bridge_cfg, "bridge.log");
+    std::thread::sleep(Duration::from_secs(2));
+    // The vehicle drives along the route at 40 m/s: 2 m per pose, 20 poses a second.
+    let mut pose = ros1_peer(
+        &master,
+        &[
+            "pub", "--topic", "/localization/current_pose", "--type", "pose", "--count", "100",
+            "--rate", "20", "--path", "0,0,2,0", "--name", "pose",
+        ],
+    );
+    let poses = perturb_tests::ros1_lines(stdout_of(&mut pose), &mut pose);
+    std::thread::sleep(Duration::from_millis(300));
+    let status = ctl_status(&ns);
+    assert!(interrupt(&mut bridge), "{}", log(&ns, "bridge.log"));
+    std::thread::sleep(Duration::from_millis(500));
+    kill_all(&mut peers);
+    let mut got = lines.into_iter().map(|h| h.join().unwrap());
+    let (cam, ev, lid) = (got.next().unwrap(), got.next().unwrap(), got.next().unwrap());
+    let _ = daemon.stop();
+    assert!(status.contains("campaign `test drive`"), "{status}");
+    let recs = records(&ev);
+    // When the pose at x crossed the ADS's side: each frame's arrival, by its stamp.
+    let t_pose = |x: f64| {
+        poses
+            .iter()
+            .find(|p| p["x"].as_f64().unwrap() >= x)
+            .and_then(|p| p["t_pub_ns"].as_u64())
+            .unwrap()
+    };
+    for (stream, frames, step, on_x, off_x, nsec_key) in [
+        ("cam", &cam, 1, 50.0, 100.0, "nsec"),
+        ("lid", &lid, 2, 120.0, 140.0, "nanosec"),
+    ] {
+        let arrival = |r: &Value| {
+            frames
+                .iter()
+                .find(|f| f["sec"] == r["stamp_sec"] && f[nsec_key] == r["stamp_nanosec"])
+                .and_then(|f| f["t_arrival_ns"].as_u64())
+        };
+        let stepped: Vec<u64> = recs
+            .iter()
+            .filter(|r| r["kind"] == "frame" && r["stream"] == stream && r["step"] == step)
+            .filter_map(arrival)
+            .collect();
+        assert!(stepped.len() >= 3, "{stream}: {} frames of step {step}", stepped.len());
+        let (first, last) = (stepped[0], *stepped.last().unwrap());
+        let (on, next_pose) = (t_pose(on_x), t_pose(on_x + 2.0));
+        let (off, after_off) = (t_pose(off_x), t_pose(off_x + 2.0));
+        let period = if stream == "cam" { 34 } else { 101 } * 1_000_000;
+        eprintln!(
+            "{stream}: step {step} on {:.1} ms after the pose at x = {on_x} m, off {:.1} ms after the pose at x = {off_x} m",
+            (first as f64 - on as f64) / 1e6,
+            (last as f64 - off as f64) / 1e6
+        );
+        assert!(first >= on, "{stream}: step {step} before its position");
+        assert!(
+            first <= next_pose + period + 50_000_000,
+            "{stream}: step {step} more than one pose message late"
+        );
+        assert!(last <= after_off + 50_000_000, "{stream}: step {step} after its end");
+        // Outside the step: no perturbation.
+        assert!(
+            recs.iter()
+                .filter(|r| r["kind"] == "frame" && r["stream"] == stream && r["applied"] == true)
+                .all(|r| r["step"] == step),
+            "{stream}: perturbed outside its step"
+        );
+    }
+}
