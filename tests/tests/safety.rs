@@ -97,8 +97,17 @@ fn ads_side_with(
         ("/perturb/events", "string", "ev"),
     ] {
         let mut args = vec![
-            "sub", "--topic", topic, "--type", ty, "--count", "1000000", "--timeout", "120",
-            "--name", name,
+            "sub",
+            "--topic",
+            topic,
+            "--type",
+            ty,
+            "--count",
+            "1000000",
+            "--timeout",
+            "120",
+            "--name",
+            name,
         ];
         if !hash {
             args.push("--no-hash");
@@ -109,8 +118,17 @@ fn ads_side_with(
     }
     let dom = domain.to_string();
     let mut lid = dds_peer(&[
-        "listen", "--topic", "/ads/lidar", "--type", "cloud", "--count", "1000000", "--timeout",
-        "120", "--domain", &dom,
+        "listen",
+        "--topic",
+        "/ads/lidar",
+        "--type",
+        "cloud",
+        "--count",
+        "1000000",
+        "--timeout",
+        "120",
+        "--domain",
+        &dom,
     ]);
     lines.push(collect_lines(stdout_of(&mut lid)));
     children.push(lid);
@@ -349,8 +367,19 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
     let mut p1 = ros1_peer(
         &master,
         &[
-            "pub", "--topic", "/vehicle/takeover", "--type", "bool", "--count", "40", "--rate",
-            "10", "--switch-at", "20", "--name", "takeover",
+            "pub",
+            "--topic",
+            "/vehicle/takeover",
+            "--type",
+            "bool",
+            "--count",
+            "40",
+            "--rate",
+            "10",
+            "--switch-at",
+            "20",
+            "--name",
+            "takeover",
         ],
     );
     let sent = perturb_tests::ros1_lines(stdout_of(&mut p1), &mut p1);
@@ -363,14 +392,28 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
     daemon.kill9();
     let mut daemon = ns.start_daemon(&daemon_cfg);
     let st = ctl_status(&ns);
-    assert!(st.contains("KILL SWITCH ENGAGED"), "after the restart: {st}");
+    assert!(
+        st.contains("KILL SWITCH ENGAGED"),
+        "after the restart: {st}"
+    );
     std::thread::sleep(Duration::from_secs(1));
     // The topic clears (false), then a person arms: perturbations resume.
     let mut p2 = ros1_peer(
         &master,
         &[
-            "pub", "--topic", "/vehicle/takeover", "--type", "bool", "--count", "30", "--rate",
-            "10", "--switch-at", "1000", "--name", "clear",
+            "pub",
+            "--topic",
+            "/vehicle/takeover",
+            "--type",
+            "bool",
+            "--count",
+            "30",
+            "--rate",
+            "10",
+            "--switch-at",
+            "1000",
+            "--name",
+            "clear",
         ],
     );
     let p2_out = collect_lines(stdout_of(&mut p2));
@@ -388,7 +431,8 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
         .expect("the clearing publisher published");
     // The clearing publisher went away: the dead man kills again.
     assert!(
-        wait_until(Duration::from_secs(5), || ctl_status(&ns).contains("dead man")),
+        wait_until(Duration::from_secs(5), || ctl_status(&ns)
+            .contains("dead man")),
         "the dead man did not engage: {}\n{}",
         ctl_status(&ns),
         log(&ns, "bridge.log")
@@ -397,7 +441,11 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
     std::thread::sleep(Duration::from_millis(500));
     kill_all(&mut peers);
     let mut got = lines.into_iter().map(|h| h.join().unwrap());
-    let (cam, ev, lid) = (got.next().unwrap(), got.next().unwrap(), got.next().unwrap());
+    let (cam, ev, lid) = (
+        got.next().unwrap(),
+        got.next().unwrap(),
+        got.next().unwrap(),
+    );
     let _ = daemon.stop();
     let raw = raw_hashes(&rec);
     let is_raw = |topic: &str, f: &Value| {
@@ -406,17 +454,19 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
             f["sec"].as_i64().or(f["sec"].as_i64()).unwrap(),
             f["nsec"].as_i64().or(f["nanosec"].as_i64()).unwrap(),
         );
-        let r = raw.get(&k).unwrap_or_else(|| panic!("frame {k:?} not recorded raw"));
+        let r = raw
+            .get(&k)
+            .unwrap_or_else(|| panic!("frame {k:?} not recorded raw"));
         r == f["sha256"].as_str().unwrap()
     };
     let ms = 1_000_000u64;
-    for (name, topic, frames) in [
-        ("camera", "/cam/raw", &cam),
-        ("LiDAR", "/lid/raw", &lid),
-    ] {
+    for (name, topic, frames) in [("camera", "/cam/raw", &cam), ("LiDAR", "/lid/raw", &lid)] {
         let t = |f: &Value| f["t_arrival_ns"].as_u64().unwrap();
         assert!(
-            frames.iter().filter(|f| t(f) < t_kill).all(|f| !is_raw(topic, f)),
+            frames
+                .iter()
+                .filter(|f| t(f) < t_kill)
+                .all(|f| !is_raw(topic, f)),
             "{name}: a raw frame before the kill"
         );
         let first_raw = frames
@@ -427,13 +477,19 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
             "{name}: first raw frame {:.1} ms after the kill message",
             (t(first_raw) - t_kill) as f64 / 1e6
         );
-        assert!(t(first_raw) - t_kill < 1000 * ms, "{name}: too slow to go raw");
+        assert!(
+            t(first_raw) - t_kill < 1000 * ms,
+            "{name}: too slow to go raw"
+        );
         // Raw from then on until the arm, perturbed after it while the topic said false.
         let killed: Vec<&Value> = frames
             .iter()
             .filter(|f| t(f) > t(first_raw) && t(f) < t_arm)
             .collect();
-        assert!(killed.len() > 10 && killed.iter().all(|f| is_raw(topic, f)), "{name}: not raw while killed");
+        assert!(
+            killed.len() > 10 && killed.iter().all(|f| is_raw(topic, f)),
+            "{name}: not raw while killed"
+        );
         // The bridge's latch follows the daemon's within its status poll (250 ms).
         let armed: Vec<&Value> = frames
             .iter()
@@ -453,7 +509,10 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
         .map(|r| r["kind"].as_str().unwrap())
         .collect();
     assert_eq!(kinds, ["kill", "arm", "kill"], "{recs:?}");
-    assert!(recs.iter().any(|r| r["reason"] == "killed" && r["applied"] == false));
+    assert!(
+        recs.iter()
+            .any(|r| r["reason"] == "killed" && r["applied"] == false)
+    );
 }
 
 /// Polls `f` until it holds or `timeout` passes.
@@ -505,8 +564,19 @@ fn a_campaign_switches_steps_where_the_vehicle_is_and_the_events_carry_the_step(
     let mut pose = ros1_peer(
         &master,
         &[
-            "pub", "--topic", "/localization/current_pose", "--type", "pose", "--count", "100",
-            "--rate", "20", "--path", "0,0,2,0", "--name", "pose",
+            "pub",
+            "--topic",
+            "/localization/current_pose",
+            "--type",
+            "pose",
+            "--count",
+            "100",
+            "--rate",
+            "20",
+            "--path",
+            "0,0,2,0",
+            "--name",
+            "pose",
         ],
     );
     let poses = perturb_tests::ros1_lines(stdout_of(&mut pose), &mut pose);
@@ -516,7 +586,11 @@ fn a_campaign_switches_steps_where_the_vehicle_is_and_the_events_carry_the_step(
     std::thread::sleep(Duration::from_millis(500));
     kill_all(&mut peers);
     let mut got = lines.into_iter().map(|h| h.join().unwrap());
-    let (cam, ev, lid) = (got.next().unwrap(), got.next().unwrap(), got.next().unwrap());
+    let (cam, ev, lid) = (
+        got.next().unwrap(),
+        got.next().unwrap(),
+        got.next().unwrap(),
+    );
     let _ = daemon.stop();
     assert!(status.contains("campaign `test drive`"), "{status}");
     let recs = records(&ev);
@@ -543,7 +617,11 @@ fn a_campaign_switches_steps_where_the_vehicle_is_and_the_events_carry_the_step(
             .filter(|r| r["kind"] == "frame" && r["stream"] == stream && r["step"] == step)
             .filter_map(arrival)
             .collect();
-        assert!(stepped.len() >= 3, "{stream}: {} frames of step {step}", stepped.len());
+        assert!(
+            stepped.len() >= 3,
+            "{stream}: {} frames of step {step}",
+            stepped.len()
+        );
         let (first, last) = (stepped[0], *stepped.last().unwrap());
         let (on, next_pose) = (t_pose(on_x), t_pose(on_x + 2.0));
         let (off, after_off) = (t_pose(off_x), t_pose(off_x + 2.0));
@@ -558,7 +636,10 @@ fn a_campaign_switches_steps_where_the_vehicle_is_and_the_events_carry_the_step(
             first <= next_pose + period + 50_000_000,
             "{stream}: step {step} more than one pose message late"
         );
-        assert!(last <= after_off + 50_000_000, "{stream}: step {step} after its end");
+        assert!(
+            last <= after_off + 50_000_000,
+            "{stream}: step {step} after its end"
+        );
         // Outside the step: no perturbation.
         assert!(
             recs.iter()
