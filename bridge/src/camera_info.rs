@@ -4,10 +4,10 @@
 //! after the image with the same stamp goes out; so a consumer that pairs image and camera_info
 //! by exact stamp (image_transport's CameraSubscriber, image_proc) finds both under the names it
 //! subscribes to. A camera_info whose image never comes (the image was lost) goes out once eight
-//! newer ones wait. Both topics are on the same transport (ROS 1, or ROS 2); over ROS 1 the sink
-//! is advertised with the type, md5sum and definition the driver's publisher sent.
+//! newer ones wait. Both topics are on the same transport (ROS 1, or ROS 2); the sink is
+//! advertised as `sensor_msgs/CameraInfo` when the bridge starts.
 
-use crate::msgs::{SmallEndpoint, SmallWriter, Wire};
+use crate::msgs::{CAMERA_INFO, SmallEndpoint, SmallWriter, Wire};
 use std::collections::VecDeque;
 use std::sync::Mutex;
 
@@ -45,21 +45,10 @@ pub fn stamp_of(data: &[u8], wire: Wire) -> Option<(i32, u32)> {
     })
 }
 
-/// The ROS 1 type a relay republishes (what the driver's publisher said).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Ros1Type {
-    /// `sensor_msgs/CameraInfo`.
-    pub name: String,
-    /// Its md5sum.
-    pub md5sum: String,
-    /// Its definition.
-    pub definition: String,
-}
-
 /// What the ingress and the egress of one stream share.
 #[derive(Debug, Default)]
 pub struct CameraInfoLink {
-    waiting: Mutex<(VecDeque<Calibration>, Option<Ros1Type>)>,
+    waiting: Mutex<VecDeque<Calibration>>,
 }
 
 /// How many camera_info messages wait for their image before the oldest goes out anyway.
@@ -67,37 +56,35 @@ const WAIT: usize = 8;
 
 impl CameraInfoLink {
     /// The ingress side: a camera_info arrived.
-    pub fn push(&self, c: Calibration, ros1: Option<Ros1Type>) {
-        let mut w = self.waiting.lock().unwrap_or_else(|p| p.into_inner());
-        if ros1.is_some() {
-            w.1 = ros1;
-        }
-        w.0.push_back(c);
+    pub fn push(&self, c: Calibration) {
+        self.waiting
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push_back(c);
     }
 
     /// The egress side: the camera_info messages to publish after the image stamped `stamp`
-    /// (those stamped at or before it, and the oldest beyond [`WAIT`]), with the ROS 1 type.
-    pub fn take_for(&self, stamp: (i32, u32)) -> (Vec<Calibration>, Option<Ros1Type>) {
+    /// (those stamped at or before it, and the oldest beyond [`WAIT`]).
+    pub fn take_for(&self, stamp: (i32, u32)) -> Vec<Calibration> {
         let mut w = self.waiting.lock().unwrap_or_else(|p| p.into_inner());
         let mut out = Vec::new();
-        while let Some(c) = w.0.front() {
-            let due = (c.stamp.0, c.stamp.1) <= stamp || w.0.len() > WAIT;
+        while let Some(c) = w.front() {
+            let due = (c.stamp.0, c.stamp.1) <= stamp || w.len() > WAIT;
             if !due {
                 break;
             }
-            out.extend(w.0.pop_front());
+            out.extend(w.pop_front());
         }
-        (out, w.1.clone())
+        out
     }
 }
 
-/// The egress side's writer, opened once the first message says its type.
+/// The egress side's writer: `sensor_msgs/CameraInfo` on the sink topic, advertised when the
+/// bridge starts (so the stack's subscribers are connected before the first calibration comes).
 pub struct CameraInfoSink {
     /// The sink topic.
     pub topic: String,
-    /// Where.
-    pub endpoint: SmallEndpoint,
-    writer: Option<Box<dyn SmallWriter>>,
+    writer: Box<dyn SmallWriter>,
     /// Messages published.
     pub published: u64,
     /// Messages that could not be published.
@@ -105,60 +92,28 @@ pub struct CameraInfoSink {
 }
 
 impl CameraInfoSink {
-    /// A sink on `topic`.
-    pub fn new(topic: String, endpoint: SmallEndpoint) -> Self {
-        CameraInfoSink {
+    /// A sink on `topic` of `endpoint`.
+    pub fn new(topic: String, endpoint: &SmallEndpoint) -> anyhow::Result<Self> {
+        let writer = endpoint.writer(&topic, CAMERA_INFO, crate::dds::Qos::default())?;
+        Ok(CameraInfoSink {
             topic,
-            endpoint,
-            writer: None,
+            writer,
             published: 0,
             failed: 0,
-        }
+        })
     }
 
     /// Publishes what `link` holds for the image stamped `stamp`.
     pub fn after_image(&mut self, link: &CameraInfoLink, stamp: (i32, u32)) {
-        let (due, ros1) = link.take_for(stamp);
-        for c in due {
-            if self.writer.is_none() {
-                let w = match (&self.endpoint, &ros1) {
-                    (SmallEndpoint::Ros1(_), Some(t)) => self.endpoint.writer_as(
-                        &self.topic,
-                        &t.name,
-                        &t.md5sum,
-                        &t.definition,
-                        crate::dds::Qos::default(),
-                    ),
-                    (SmallEndpoint::Ros1(_), None) => {
-                        anyhow::Result::Err(anyhow::anyhow!("the source did not say its type"))
-                    }
-                    (SmallEndpoint::Dds(_), _) => self.endpoint.writer_as(
-                        &self.topic,
-                        ROS2_TYPE,
-                        "",
-                        "",
-                        crate::dds::Qos::default(),
-                    ),
-                };
-                match w {
-                    Ok(w) => self.writer = Some(w),
-                    Err(e) => {
-                        self.failed += 1;
-                        crate::stats::log_bad(
-                            &format!("camera_info -> {}", self.topic),
-                            self.failed,
-                            &e,
-                        );
-                        continue;
-                    }
-                }
-            }
-            let w = self.writer.as_mut().expect("opened above");
-            if w.wire() != c.wire {
-                self.failed += 1;
-                continue;
-            }
-            match w.write(&c.data) {
+        for c in link.take_for(stamp) {
+            let r = if self.writer.wire() == c.wire {
+                self.writer.write(&c.data)
+            } else {
+                Err(anyhow::anyhow!(
+                    "a camera_info in another serialization than the sink's transport"
+                ))
+            };
+            match r {
                 Ok(()) => self.published += 1,
                 Err(e) => {
                     self.failed += 1;
@@ -193,14 +148,14 @@ mod tests {
         let l = CameraInfoLink::default();
         assert_eq!(cal(5).stamp, (5, 7));
         for s in [1, 2, 3] {
-            l.push(cal(s), None);
+            l.push(cal(s));
         }
-        let (due, _) = l.take_for((2, 7));
+        let due = l.take_for((2, 7));
         assert_eq!(due.iter().map(|c| c.stamp.0).collect::<Vec<_>>(), [1, 2]);
         for s in 4..14 {
-            l.push(cal(s), None);
+            l.push(cal(s));
         }
-        let (due, _) = l.take_for((0, 0));
+        let due = l.take_for((0, 0));
         assert_eq!(due.len(), 3, "the oldest beyond 8 go out anyway");
         let mut ros1 = vec![0u8; 4];
         ros1.extend_from_slice(&9u32.to_le_bytes());

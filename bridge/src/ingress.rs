@@ -9,11 +9,11 @@
 
 use crate::adapter::{Adapter, Control, POLL};
 use crate::bus::{Bus, Side};
-use crate::camera_info::{Calibration, CameraInfoLink, ROS2_TYPE, Ros1Type, stamp_of};
+use crate::camera_info::{Calibration, CameraInfoLink, ROS2_TYPE, stamp_of};
 use crate::dds::{Received, RosType, TopicSpec};
 use crate::endpoint::Endpoint;
 use crate::frame::{FrameMeta, OwnedPayload, Payload, StreamKind, monotonic_ns, wall_ns};
-use crate::msgs::{SmallEndpoint, Wire};
+use crate::msgs::SmallEndpoint;
 use crate::stats::{AdapterReport, log_bad};
 use crate::topic::Ros1Seq;
 use anyhow::Result;
@@ -57,19 +57,11 @@ fn relay_camera_info(
         let r = reader.take(POLL, &mut |m| match stamp_of(m.data, m.wire) {
             Some(stamp) => {
                 got += 1;
-                let ros1 = (m.wire == Wire::Ros1).then(|| Ros1Type {
-                    name: m.type_name.to_string(),
-                    md5sum: String::new(),
-                    definition: m.definition.unwrap_or("").to_string(),
+                link.push(Calibration {
+                    stamp,
+                    data: m.data.to_vec(),
+                    wire: m.wire,
                 });
-                link.push(
-                    Calibration {
-                        stamp,
-                        data: m.data.to_vec(),
-                        wire: m.wire,
-                    },
-                    ros1,
-                );
             }
             None => {
                 bad += 1;

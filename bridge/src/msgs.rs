@@ -70,10 +70,24 @@ pub const BOOL: SmallType = SmallType {
         name: "std_msgs/Bool",
         ros2_name: "std_msgs/msg/Bool",
         md5sum: "8b94c1b53db61fb6aed406028ad6332a",
-        definition: "bool data\n",
+        definition: include_str!("msgs_ros1/std_msgs-Bool.txt"),
     },
     ros2_definition: "bool data\n",
 };
+
+/// `sensor_msgs/CameraInfo` (relayed as bytes, never decoded: no ROS 2 definition needed).
+pub const CAMERA_INFO: SmallType = SmallType {
+    ros1: MsgType {
+        name: "sensor_msgs/CameraInfo",
+        ros2_name: "sensor_msgs/msg/CameraInfo",
+        md5sum: "c9a58c1b0b154e0e6da7578cb991d214",
+        definition: include_str!("msgs_ros1/sensor_msgs-CameraInfo.txt"),
+    },
+    ros2_definition: "",
+};
+
+/// The ROS 1 types of this module, for the check against Debian's rospy.
+pub const ROS1_TYPES: [MsgType; 2] = [BOOL.ros1, CAMERA_INFO.ros1];
 
 const ROS2_HEADER: &str = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n";
 const ROS2_POSE: &str = "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n";

@@ -205,7 +205,8 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
             let camera_info = match (&e.camera_info, calibrations.get(&e.stream)) {
                 (Some(topic), Some(link)) => Some((
                     link.clone(),
-                    CameraInfoSink::new(topic.clone(), small.of(e.transport)?),
+                    CameraInfoSink::new(topic.clone(), &small.of(e.transport)?)
+                        .with_context(|| format!("egress[{i}].camera_info"))?,
                 )),
                 _ => None,
             };

@@ -252,8 +252,10 @@ def make(args, i):
     if args.type == "camera_info":
         return CameraInfo(header=header, height=args.height, width=args.width,
                           distortion_model="plumb_bob", d=[0.1 * i, -0.2, 0.0, 0.0, 0.01],
-                          k=[500.0, 0, 320, 0, 500.0, 240, 0, 0, 1], r=[1.0, 0, 0, 0, 1, 0, 0, 0, 1],
-                          p=[500.0, 0, 320, 0, 0, 500.0, 240, 0, 0, 0, 1, 0], binning_x=0,
+                          k=[500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0],
+                          r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                          p=[500.0, 0.0, 320.0, 0.0, 0.0, 500.0, 240.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+                          binning_x=0,
                           binning_y=0, roi=RegionOfInterest(0, 0, 0, 0, False))
     if args.type == "cloud":
         fields = [PointField("x", 0, 7, 1), PointField("y", 4, 7, 1), PointField("z", 8, 7, 1),

@@ -13,7 +13,7 @@ fn ros1_msg_types_match_rospy() {
     let python = std::env::var("PERTURB_ROS_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".into());
     let script = "import json, importlib\n\
         out = {}\n\
-        for name in ['sensor_msgs/Image', 'sensor_msgs/CompressedImage', 'sensor_msgs/PointCloud2', 'std_msgs/String', 'rosgraph_msgs/Clock']:\n\
+        for name in ['sensor_msgs/Image', 'sensor_msgs/CompressedImage', 'sensor_msgs/PointCloud2', 'std_msgs/String', 'rosgraph_msgs/Clock', 'sensor_msgs/CameraInfo', 'std_msgs/Bool']:\n\
         \x20   pkg, ty = name.split('/')\n\
         \x20   cls = getattr(importlib.import_module(pkg + '.msg'), ty)\n\
         \x20   out[name] = [cls._md5sum, cls._full_text]\n\
@@ -32,5 +32,10 @@ fn ros1_msg_types_match_rospy() {
         assert_eq!(t.md5sum, want[0], "{} md5sum", t.name);
         assert_eq!(t.definition, want[1], "{} definition", t.name);
         assert_eq!(ros1::msg_type(t.ros2_name), Some(t));
+    }
+    for t in perturb_bridge::msgs::ROS1_TYPES {
+        let want = &v[t.name];
+        assert_eq!(t.md5sum, want[0], "{} md5sum", t.name);
+        assert_eq!(t.definition, want[1], "{} definition", t.name);
     }
 }

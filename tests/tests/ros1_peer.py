@@ -79,9 +79,9 @@ def make(kind, k, a):
     if kind == "camera_info":
         m = CameraInfo(height=48, width=64, distortion_model="plumb_bob")
         m.D = [0.01 * k, -0.2, 0.0, 0.0, 0.01]
-        m.K = [500.0, 0, 32, 0, 500.0, 24, 0, 0, 1]
-        m.R = [1.0, 0, 0, 0, 1, 0, 0, 0, 1]
-        m.P = [500.0, 0, 32, 0, 0, 500.0, 24, 0, 0, 0, 1, 0]
+        m.K = [500.0, 0.0, 32.0, 0.0, 500.0, 24.0, 0.0, 0.0, 1.0]
+        m.R = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+        m.P = [500.0, 0.0, 32.0, 0.0, 0.0, 500.0, 24.0, 0.0, 0.0, 0.0, 1.0, 0.0]
         m.header.frame_id = a.frame_id
         m.header.stamp = rospy.Time(a.stamp_base + k, 1000 * k + 7)
         return m
