@@ -97,3 +97,81 @@ fn a_recorder_stops_after_perturbd_is_gone_for_the_configured_time_and_not_befor
         .unwrap_or_else(|| panic!("no recorder in {rep}"));
     assert_eq!(rec["received"], 10, "{rec}");
 }
+
+/// More recorders of the same streams than their QoS admits: the ones that fit record, the one
+/// that does not says why at once and exits with an error; every one honours `--seconds` (a
+/// second recorder used to hang, ignoring `--seconds`, SIGINT and SIGTERM).
+#[test]
+fn extra_recorders_record_or_stop_at_once_with_a_clear_error() {
+    let ns = Namespace::new("recorders");
+    let daemon_cfg = ns.dir.join("perturbd.toml");
+    std::fs::write(
+        &daemon_cfg,
+        "[[streams]]\nname = \"cam\"\nmodality = \"camera\"\n\
+         perturbation = { id = \"C-A1\", severity = 1, seed = 2 }\n",
+    )
+    .unwrap();
+    let _daemon = ns.start_daemon(&daemon_cfg);
+    let source_cfg = ns.dir.join("source.toml");
+    std::fs::write(
+        &source_cfg,
+        "[bridge]\nname = \"synth\"\n\n\
+         [[synthetic.camera]]\nstream = \"cam\"\nwidth = 160\nheight = 100\nrate_hz = 20.0\n",
+    )
+    .unwrap();
+    let mut source = ns
+        .command(exe("perturb-bridge"))
+        .arg("--config")
+        .arg(&source_cfg)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // The raw side admits 4 readers (the daemon and 3 recorders), the fourth recorder is one
+    // too many.
+    let record = |i: usize| {
+        ns.command(exe("perturb-bridge"))
+            .args(["record", "--stream", "cam=image", "--seconds", "3", "--out"])
+            .arg(ns.dir.join(format!("rec{i}")))
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let mut recs: Vec<_> = (0..3).map(record).collect();
+    std::thread::sleep(Duration::from_millis(1500));
+    let t = Instant::now();
+    let extra = record(3).wait_with_output().unwrap();
+    let took = t.elapsed();
+    let err = String::from_utf8_lossy(&extra.stderr);
+    assert!(
+        !extra.status.success(),
+        "the extra recorder succeeded:\n{err}"
+    );
+    assert!(err.contains("as many readers as its QoS allows"), "{err}");
+    assert!(
+        took < Duration::from_secs(10),
+        "the extra recorder took {took:?} to give up"
+    );
+    for (i, r) in recs.iter_mut().enumerate() {
+        let t = Instant::now();
+        let status = loop {
+            if let Some(s) = r.try_wait().unwrap() {
+                break Some(s);
+            }
+            if t.elapsed() > Duration::from_secs(20) {
+                let _ = r.kill();
+                break None;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        let mut log = String::new();
+        r.stderr.take().unwrap().read_to_string(&mut log).unwrap();
+        assert!(
+            status.is_some_and(|s| s.success()),
+            "recorder {i} did not stop after --seconds: {status:?}\n{log}"
+        );
+        assert!(log.contains("recorded for the 3 s asked for"), "{log}");
+    }
+    let _ = perturb_wire::process::interrupt(&mut source, Duration::from_secs(10));
+}
