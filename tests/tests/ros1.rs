@@ -1220,3 +1220,74 @@ fn ros1_profile_mcap_ouster_replays_through_perturbd() {
         assert_ne!(r["sha256"], p["sha256"], "not perturbed");
     }
 }
+
+/// A ROS 1 bag with bz2 chunks (as `rosbag record --bz2` writes it, here by Debian's Python
+/// `rosbag`) replays with its messages decompressed ahead of the clock by a reader thread; where
+/// the machine cannot decompress as fast as the bag plays, the replay says so with the measured
+/// lag instead of silently stretching the timing.
+#[test]
+fn a_bz2_bag_replays_read_ahead_and_a_replay_that_cannot_keep_up_says_by_how_much() {
+    if !have_ros1() {
+        return;
+    }
+    let ns = Namespace::new("bz2-replay");
+    let bag = ns.dir.join("bz2.bag");
+    // 3 s of 320x240 rgb8 at 30 Hz, noisy rows (bz2 works hard on them).
+    let script = format!(
+        "import rosbag, rospy, random\n\
+         from sensor_msgs.msg import Image\n\
+         random.seed(1)\n\
+         rows = [bytes(random.getrandbits(8) for _ in range(320 * 3)) for _ in range(64)]\n\
+         with rosbag.Bag('{}', 'w', compression='bz2') as b:\n\
+         \x20   for k in range(90):\n\
+         \x20       m = Image(height=240, width=320, encoding='rgb8', step=960)\n\
+         \x20       m.data = b''.join(rows[(k + i) % 64] for i in range(240))\n\
+         \x20       t = rospy.Time(1000 + k // 30, (k % 30) * 33333333)\n\
+         \x20       m.header.stamp = t\n\
+         \x20       b.write('/cam/image_raw', m, t)\n",
+        bag.display()
+    );
+    let o = std::process::Command::new(ros_python())
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let replay = |rate: &str| {
+        let report = ns.dir.join(format!("report-{rate}.json"));
+        let t = Instant::now();
+        let o = ns
+            .command(exe("perturb-bridge"))
+            .args(["--linger", "0", "--report"])
+            .arg(&report)
+            .arg("replay")
+            .arg(&bag)
+            .args(["--bus", "local", "--rate", rate])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let took = t.elapsed().as_secs_f64();
+        let rep: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let r = rep
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|a| a["name"].as_str().unwrap().starts_with("replay"))
+            .unwrap()
+            .clone();
+        (took, r, String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (took, r, _) = replay("1");
+    assert_eq!(r["forwarded"], 90, "{r}");
+    eprintln!(
+        "bz2 bag of 3.0 s replayed at rate 1 in {took:.2} s; notes: {}",
+        r["notes"]
+    );
+    // A hundred times as fast as recorded: no machine decompresses 3000 bz2 frames a second.
+    let (_, r, log) = replay("100");
+    let notes = r["notes"].to_string();
+    assert!(
+        notes.contains("largest lag") && log.contains("behind the bag's timing"),
+        "the replay fell behind without a word: {r}\n{log}"
+    );
+    assert_eq!(r["forwarded"], 90, "{r}");
+}
