@@ -314,6 +314,36 @@ fn the_ads_keeps_receiving_every_frame_through_a_daemon_crash_and_stall() {
         + eg_cam["fallback_raw"]["late"].as_u64().unwrap();
     assert_eq!(fallback_records, counted, "events and report agree");
     assert_eq!(recs[0]["version"], 2);
+    valid_against_the_schema(&ns, &recs);
+}
+
+/// Every record validates against docs/events.schema.json (the PyPI `jsonschema` package).
+fn valid_against_the_schema(ns: &Namespace, recs: &[Value]) {
+    if !have_python_modules("python3", &["jsonschema"], "pip install jsonschema") {
+        return;
+    }
+    let file = ns.dir.join("records.json");
+    std::fs::write(&file, serde_json::to_string(recs).unwrap()).unwrap();
+    let schema = perturb_tests::workspace().join("docs/events.schema.json");
+    let o = std::process::Command::new("python3")
+        .args([
+            "-c",
+            "import json, sys, jsonschema\n\
+             schema = json.load(open(sys.argv[1]))\n\
+             v = jsonschema.Draft202012Validator(schema)\n\
+             bad = [(r, e.message) for r in json.load(open(sys.argv[2])) for e in v.iter_errors(r)]\n\
+             print(bad[:3]); sys.exit(1 if bad else 0)",
+        ])
+        .arg(&schema)
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "records that do not match docs/events.schema.json: {}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 /// sha256 of every raw frame the bridge recorded, by (stream topic, stamp).
@@ -509,6 +539,7 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
         .map(|r| r["kind"].as_str().unwrap())
         .collect();
     assert_eq!(kinds, ["kill", "arm", "kill"], "{recs:?}");
+    valid_against_the_schema(&ns, &recs);
     assert!(
         recs.iter()
             .any(|r| r["reason"] == "killed" && r["applied"] == false)
