@@ -1291,3 +1291,138 @@ fn a_bz2_bag_replays_read_ahead_and_a_replay_that_cannot_keep_up_says_by_how_muc
     );
     assert_eq!(r["forwarded"], 90, "{r}");
 }
+
+/// The perturbation log on the vehicle's bus: a run recorded the usual way (Debian's `rosbag
+/// record` of the ADS's topics and `/perturb/events`, which the bridge publishes on ROS 1) is
+/// one bag that `perturb analyze` reads: its segments are the perturbations perturbd applied.
+#[test]
+fn ros1_events_on_the_bus_recorded_by_rosbag_are_what_perturb_analyze_reads() {
+    if !have_ros1() {
+        return;
+    }
+    let ns = Namespace::new("ros1-events");
+    let master = Ros1Master::start(&ns.dir);
+    let daemon_cfg = ns.dir.join("perturbd.toml");
+    std::fs::write(
+        &daemon_cfg,
+        "[[streams]]\nname = \"cam\"\nmodality = \"camera\"\n",
+    )
+    .unwrap();
+    let bridge_cfg = ns.dir.join("bridge.toml");
+    std::fs::write(
+        &bridge_cfg,
+        "[bridge]\nname = \"events_bridge\"\n\n[ros1]\nhostname = \"127.0.0.1\"\n\n\
+         [[ingress]]\ntopic = \"/sensors/cam\"\ntype = \"image\"\nstream = \"cam\"\ntransport = \"ros1\"\n\n\
+         [[egress]]\nstream = \"cam\"\ntopic = \"/ads/camera\"\ntransport = \"ros1\"\n\n\
+         [events]\ntopic = \"/perturb/events\"\n",
+    )
+    .unwrap();
+    let _daemon = ns.start_daemon(&daemon_cfg);
+    let mut bridge = start_bridge(&ns, Some(&master), &bridge_cfg, "bridge.log");
+    assert!(
+        wait_for(Duration::from_secs(20), || rostopic_list(&master, "-p")
+            .contains("/perturb/events")),
+        "{}",
+        log_of(&ns, "bridge.log")
+    );
+    let bag = ns.dir.join("run.bag");
+    let mut rec = master
+        .command("rosbag")
+        .args(["record", "-O"])
+        .arg(&bag)
+        .args(["/ads/camera", "/perturb/events", "/odom"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    let mut pose = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/odom",
+            "--type",
+            "pose",
+            "--count",
+            "90",
+            "--rate",
+            "10",
+            "--path",
+            "0,0,1,0",
+            "--name",
+            "odom",
+            "--wait-subscribers",
+            "1",
+        ],
+    );
+    let mut cam = ros1_peer(
+        &master,
+        &[
+            "pub",
+            "--topic",
+            "/sensors/cam",
+            "--type",
+            "image",
+            "--count",
+            "90",
+            "--rate",
+            "10",
+            "--size",
+            "64x48",
+            "--name",
+            "cam",
+            "--no-hash",
+        ],
+    );
+    let ctl = |args: &[&str]| {
+        let o = ns.ctl(args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    std::thread::sleep(Duration::from_secs(2));
+    ctl(&["set", "cam", "C-A1", "--severity", "2", "--seed", "3"]);
+    std::thread::sleep(Duration::from_secs(3));
+    ctl(&["set", "cam", "C-F5", "--severity", "1"]);
+    std::thread::sleep(Duration::from_secs(2));
+    ctl(&["off", "cam"]);
+    let sent = ros1_lines(
+        std::io::BufReader::new(cam.stdout.take().unwrap()),
+        &mut cam,
+    );
+    let _ = ros1_lines(
+        std::io::BufReader::new(pose.stdout.take().unwrap()),
+        &mut pose,
+    );
+    assert_eq!(sent.len(), 90);
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(interrupt(&mut rec), "rosbag record did not stop");
+    assert!(interrupt(&mut bridge), "{}", log_of(&ns, "bridge.log"));
+    let out = ns.dir.join("study");
+    let o = ns
+        .command(exe("perturb"))
+        .arg("analyze")
+        .arg(&bag)
+        .args(["--pose-topic", "/odom", "--json", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "perturb analyze: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let segments = std::fs::read_to_string(out.join("segments.csv")).unwrap();
+    let conditions: Vec<String> = segments
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            format!("{} {}", cells[1], cells[2])
+        })
+        .collect();
+    assert_eq!(
+        conditions,
+        ["nominal -", "C-A1 2", "C-F5 1", "nominal -"],
+        "segments:\n{segments}"
+    );
+}
