@@ -219,7 +219,11 @@ impl Adapter for Egress {
         } = *self;
         out.camera_info = camera_info;
         match guard {
-            Some(g) if side == Side::Perturbed && bus.name() == "iceoryx2" => {
+            Some(g)
+                if side == Side::Perturbed
+                    && bus.name() == "iceoryx2"
+                    && g.on_late != crate::guard::OnLate::Wait =>
+            {
                 run_guarded(bus, &stream, kind, g, &kill, ctl, &mut out)?
             }
             _ => run_plain(bus, &stream, kind, side, ctl, &mut out)?,

@@ -6,8 +6,10 @@
 //! default), it publishes the raw frame in its place, header unchanged, and counts it
 //! (`fallback_raw`, by reason). When `perturbd` is gone (its output has no publisher) raw frames
 //! go out at once, without waiting for the deadline; while the bridge's kill switch holds, too.
-//! A perturbed frame that arrives after its raw frame went out is discarded (counted
-//! `late_discarded`): the ADS gets each sequence number once, in order.
+//! A daemon that has delivered nothing for two deadlines is taken as stalled: raw frames go out
+//! at once (reason `late`), in the sensor's cadence, until it delivers again. A perturbed frame
+//! that arrives after its raw frame went out is discarded (counted `late_discarded`): the ADS gets
+//! each frame once, in order.
 //!
 //! With `on_late = "drop"` (hardware-in-the-loop timing studies, where a fallback would mask the
 //! daemon's latency) a late frame is not published and is counted lost (`daemon_late` or
@@ -35,6 +37,10 @@ pub enum OnLate {
     /// Publish nothing for it, count it lost (timing studies, where a fallback would hide the
     /// daemon's latency).
     Drop,
+    /// No deadline: publish each perturbed frame when it comes, however late, and nothing while
+    /// the daemon is down (the egress does not read the raw side; for comparisons and for
+    /// replays where every perturbed frame matters more than its time).
+    Wait,
 }
 
 /// The deadline settings of one egress stream.
@@ -175,6 +181,8 @@ pub struct Guard {
     pub fallback: FallbackCounts,
     /// Perturbed frames that came after their raw frame had gone out.
     pub late_discarded: u64,
+    /// When the last perturbed frame arrived.
+    last_perturbed: Option<Instant>,
 }
 
 /// How many recent sequence numbers the guard remembers.
@@ -195,6 +203,7 @@ impl Guard {
             last_raw_ns: None,
             fallback: FallbackCounts::default(),
             late_discarded: 0,
+            last_perturbed: None,
         }
     }
 
@@ -275,14 +284,25 @@ impl Guard {
             out.push(Decision::Raw(frame, Fallback::Killed));
             return;
         }
+        let deadline = self.deadline();
         let p = Pending {
             frame,
             key,
-            deadline: now + self.deadline(),
+            deadline: now + deadline,
         };
         if !daemon_up {
             self.flush(Fallback::DaemonDown, out);
             self.late(p, Fallback::DaemonDown, out);
+            return;
+        }
+        // A daemon silent for two deadlines is stalled: the frames go out at once, in the
+        // sensor's cadence, until it delivers again (the first late frame waited its deadline).
+        if self
+            .last_perturbed
+            .is_some_and(|t| now.saturating_duration_since(t) > 2 * deadline)
+        {
+            self.flush(Fallback::Late, out);
+            self.late(p, Fallback::Late, out);
             return;
         }
         self.pending.push_back(p);
@@ -290,6 +310,7 @@ impl Guard {
 
     /// A perturbed frame arrived.
     pub fn on_perturbed(&mut self, frame: Held, out: &mut Vec<Decision>) {
+        self.last_perturbed = Some(Instant::now());
         let key = FrameKey::of(&frame);
         if let Some(i) = self.pending.iter().position(|p| p.key == key) {
             // Older raw frames whose perturbed versions never came (the daemon dropped them):
@@ -523,6 +544,22 @@ mod tests {
         g.on_raw(frame_stamped(4, 99), t, true, false, &mut out);
         g.on_perturbed(frame_stamped(4, 99), &mut out);
         assert_eq!(seqs(&out), [(4, "perturbed"), (4, "perturbed")]);
+    }
+
+    #[test]
+    fn a_stalled_daemon_gets_one_deadline_then_frames_go_out_at_once() {
+        let mut g = guard(OnLate::Raw);
+        let t = Instant::now();
+        let mut out = Vec::new();
+        g.on_raw(frame(1), t, true, false, &mut out);
+        g.on_perturbed(frame(1), &mut out);
+        let later = Instant::now() + Duration::from_millis(61);
+        g.on_raw(frame(2), later, true, false, &mut out);
+        assert_eq!(
+            seqs(&out),
+            [(1, "perturbed"), (2, "late")],
+            "silent for 61 ms > 2 x 30 ms"
+        );
     }
 
     #[test]

@@ -246,7 +246,9 @@ pub struct EgressEntry {
     #[serde(default)]
     pub rate_hz: Option<f64>,
     /// What a frame that misses its deadline becomes: `raw` (the default: the raw frame goes out
-    /// in its place, as on a vehicle) or `drop` (nothing goes out, counted: timing studies).
+    /// in its place, as on a vehicle), `drop` (nothing goes out, counted: timing studies) or
+    /// `wait` (no deadline: each perturbed frame goes out when it comes, nothing while perturbd
+    /// is down).
     #[serde(default)]
     pub on_late: crate::guard::OnLate,
     /// Where the stream's `camera_info` goes (the ingress of the stream names its source).
