@@ -248,7 +248,8 @@ impl Guard {
                 self.fallback.add(why);
                 out.push(Decision::Raw(p.frame, why));
             }
-            OnLate::Drop => out.push(Decision::Dropped(seq, why)),
+            // `wait` has no guard; treated as `drop` should a guard be built with it.
+            OnLate::Drop | OnLate::Wait => out.push(Decision::Dropped(seq, why)),
         }
     }
 
