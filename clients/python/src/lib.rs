@@ -17,6 +17,8 @@
 //! Built with maturin (`pip install clients/python`), which sets `PYO3_BUILD_EXTENSION_MODULE`
 //! so that the extension does not link libpython.
 
+mod report;
+
 use numpy::{
     IxDyn, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray,
     PyUntypedArrayMethods,
@@ -958,5 +960,6 @@ fn _perturb(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(input_is_copied, m)?)?;
     m.add_function(wrap_pyfunction!(plan_batch, m)?)?;
     m.add_function(wrap_pyfunction!(mark_done, m)?)?;
+    m.add_function(wrap_pyfunction!(report::report, m)?)?;
     Ok(())
 }

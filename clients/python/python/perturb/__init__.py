@@ -14,6 +14,8 @@ True
 - :class:`CameraPerturber` perturbs HxWx3 (rgb8), HxWx4 (rgba8) or HxW (mono8) uint8 arrays.
 - :class:`LidarPerturber` perturbs (N, k) float32 point arrays (x, y, z, intensity, extras).
 - :func:`detect` runs the LiDAR clustering detector (``perturb detect``).
+- :func:`report` writes the study report (``perturb report``): the paper's tables and figures
+  in one self-contained HTML page from a folder of the study tools' outputs.
 - :mod:`perturb.ray` perturbs Ray Datasets and runs ``perturb batch`` on a Ray cluster.
 - :mod:`perturb.adapters` wraps perturbers as torchvision / albumentations transforms and a
   PyTorch ``Dataset``.
@@ -30,6 +32,7 @@ from ._perturb import (
     __version__,
     catalogue,
     detect,
+    report,
 )
 
 __all__ = [
@@ -39,6 +42,7 @@ __all__ = [
     "__version__",
     "catalogue",
     "detect",
+    "report",
     "perturber",
 ]
 

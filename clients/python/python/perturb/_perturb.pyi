@@ -101,6 +101,19 @@ def plan_batch(
 ) -> Dict[str, Any]:
     """Plans a folder batch as ``perturb batch`` and writes ``OUT/batch.json``."""
 
+def report(
+    study_dir: _Path,
+    output: _Path = "report.html",
+    *,
+    title: Optional[str] = None,
+    resamples: int = 10000,
+    seed: int = 0,
+) -> Dict[str, Any]:
+    """Writes the study report (``perturb report``): one self-contained HTML page with the
+    paper's tables and figures from the outputs in ``study_dir``, and ``<stem>.json`` and
+    ``<stem>-<table>.csv`` beside it. Returns ``html``, ``json``, ``csv``, ``present``,
+    ``missing`` (section -> why its input is missing) and ``used``."""
+
 def mark_done(dir: _Path, files: int) -> None:
     """Writes a set's ``.done`` marker."""
 
