@@ -83,6 +83,36 @@ def detect(
 ) -> List[Detection]:
     """The clustering detector's boxes (``perturb detect --json``)."""
 
+class Encoding(TypedDict):
+    name: str
+    aliases: List[str]
+    layout: str
+    bits: int
+    bytes_per_pixel: int
+    tile: List[int]
+    working: str
+    opencv: Optional[str]
+    summary: str
+
+def encodings() -> List[Encoding]:
+    """The ``sensor_msgs/Image`` encodings the package reads and writes (one table for all)."""
+
+def apply_encoded(
+    data: bytes,
+    encoding: str,
+    width: int,
+    height: int,
+    step: int,
+    id: str,
+    severity: int,
+    seed: int = 0,
+    seq: int = 0,
+    *,
+    is_bigendian: int = 0,
+    bit_depth: Optional[int] = None,
+) -> bytes:
+    """The perturbed bytes of a frame in ``encoding`` (same length, encoding, step, byte order)."""
+
 def input_is_copied(array: npt.ArrayLike, *, cloud: bool = False) -> bool:
     """True if the package copies ``array`` before reading it (its strides are not packed)."""
 
