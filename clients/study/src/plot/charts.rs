@@ -3,7 +3,7 @@
 //! transfer scatter plots, and the small trend and completion bars of the paper's tables.
 
 use super::labels::{LabelPlacer, Rect, text_width};
-use super::{FAIL_RED, OK_GREEN, UNJUDGED_GREY, nice_length, plot_err, series_colour};
+use super::{FAIL_RED, OK_GREEN, UNJUDGED_GREY, plot_err, series_colour};
 use crate::analyze::Outcome;
 use plotters::prelude::*;
 
@@ -359,9 +359,4 @@ pub fn completion_bars(runs: &[(Option<f64>, Outcome)]) -> crate::Result<String>
         root.present().map_err(e())?;
     }
     Ok(svg)
-}
-
-/// A step for an axis over `span`: a round value giving about `ticks` ticks.
-pub fn axis_step(span: f64, ticks: usize) -> f64 {
-    nice_length(span / ticks.max(1) as f64)
 }

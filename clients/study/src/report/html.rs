@@ -360,11 +360,11 @@ fn rq3(s: &mut String, r: &Report) -> crate::Result<()> {
                 bars(&x.completions, &x.outcomes)?,
                 td(&format!("[{}]", x.outcomes.join(","))),
                 td_num(x.failure_rate, 2),
-                td_num(x.cte_avg, 2),
-                td_num(x.cte_max, 2),
-                td_num(x.jitter_avg, 3),
-                td_num(x.jitter_max, 3),
-                td_num(x.jitter_std, 3),
+                td_num(x.trajectory.cte_avg, 2),
+                td_num(x.trajectory.cte_max, 2),
+                td_num(x.trajectory.jitter_avg, 3),
+                td_num(x.trajectory.jitter_max, 3),
+                td_num(x.trajectory.jitter_std, 3),
                 td_num(x.coverage_5m, 3),
             );
         }
@@ -576,11 +576,11 @@ fn rq4(s: &mut String, r: &Report) -> crate::Result<()> {
             td(&x.set),
             bars(&x.completions, &x.outcomes)?,
             td(&format!("[{}]", x.outcomes.join(","))),
-            td_num(x.cte_avg, 2),
-            td_num(x.cte_max, 2),
-            td_num(x.jitter_avg, 2),
-            td_num(x.jitter_max, 2),
-            td_num(x.jitter_std, 2),
+            td_num(x.trajectory.cte_avg, 2),
+            td_num(x.trajectory.cte_max, 2),
+            td_num(x.trajectory.jitter_avg, 2),
+            td_num(x.trajectory.jitter_max, 2),
+            td_num(x.trajectory.jitter_std, 2),
             td_num(x.shared_until_m, 1),
         );
     }

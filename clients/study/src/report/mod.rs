@@ -133,6 +133,44 @@ pub struct Combined {
     pub notes: Vec<String>,
 }
 
+/// The trajectory metrics of an aggregated row, as the tools wrote them.
+#[derive(Clone, Debug, Serialize)]
+pub struct Trajectory {
+    /// CTE average, m.
+    pub cte_avg: Option<f64>,
+    /// CTE maximum, m.
+    pub cte_max: Option<f64>,
+    /// Jitter average.
+    pub jitter_avg: Option<f64>,
+    /// Jitter maximum.
+    pub jitter_max: Option<f64>,
+    /// Jitter standard deviation.
+    pub jitter_std: Option<f64>,
+}
+
+impl Trajectory {
+    fn of(row: &Value) -> Self {
+        Trajectory {
+            cte_avg: f(row, "cte_avg"),
+            cte_max: f(row, "cte_max"),
+            jitter_avg: f(row, "jitter_avg"),
+            jitter_max: f(row, "jitter_max"),
+            jitter_std: f(row, "jitter_std"),
+        }
+    }
+
+    /// The five values as CSV cells.
+    fn cells(&self) -> [String; 5] {
+        [
+            raw(self.cte_avg),
+            raw(self.cte_max),
+            raw(self.jitter_avg),
+            raw(self.jitter_max),
+            raw(self.jitter_std),
+        ]
+    }
+}
+
 /// One row of the RQ3 table (a perturbation over its runs).
 #[derive(Clone, Debug, Serialize)]
 pub struct Rq3Row {
@@ -152,16 +190,9 @@ pub struct Rq3Row {
     pub run_severities: Vec<Option<u8>>,
     /// Failing / judged runs.
     pub failure_rate: Option<f64>,
-    /// CTE average, m.
-    pub cte_avg: Option<f64>,
-    /// CTE maximum, m.
-    pub cte_max: Option<f64>,
-    /// Jitter average.
-    pub jitter_avg: Option<f64>,
-    /// Jitter maximum.
-    pub jitter_max: Option<f64>,
-    /// Jitter standard deviation.
-    pub jitter_std: Option<f64>,
+    /// CTE and jitter.
+    #[serde(flatten)]
+    pub trajectory: Trajectory,
     /// Near-field coverage.
     pub coverage_5m: Option<f64>,
 }
@@ -227,16 +258,9 @@ pub struct Rq4Row {
     pub completions: Vec<Option<f64>>,
     /// Outcome letters.
     pub outcomes: Vec<String>,
-    /// CTE average.
-    pub cte_avg: Option<f64>,
-    /// CTE maximum.
-    pub cte_max: Option<f64>,
-    /// Jitter average.
-    pub jitter_avg: Option<f64>,
-    /// Jitter maximum.
-    pub jitter_max: Option<f64>,
-    /// Jitter standard deviation.
-    pub jitter_std: Option<f64>,
+    /// CTE and jitter.
+    #[serde(flatten)]
+    pub trajectory: Trajectory,
     /// The shared non-failing portion, m.
     pub shared_until_m: Option<f64>,
 }
@@ -497,11 +521,7 @@ fn closed_loop(inputs: &Inputs, study_dir: &Path) -> Section<Vec<ClosedLoop>> {
                         .map(|a| a.iter().map(|s| s.as_u64().map(|s| s as u8)).collect())
                         .unwrap_or_default(),
                     failure_rate: f(r, "failure_rate"),
-                    cte_avg: f(r, "cte_avg"),
-                    cte_max: f(r, "cte_max"),
-                    jitter_avg: f(r, "jitter_avg"),
-                    jitter_max: f(r, "jitter_max"),
-                    jitter_std: f(r, "jitter_std"),
+                    trajectory: Trajectory::of(r),
                     coverage_5m: f(r, "coverage_5m"),
                 })
                 .collect();
@@ -656,11 +676,7 @@ fn rq4(inputs: &Inputs) -> Section<Vec<Rq4Row>> {
             set: text(r, "set"),
             completions: completions(r),
             outcomes: outcome_letters(r),
-            cte_avg: f(r, "cte_avg"),
-            cte_max: f(r, "cte_max"),
-            jitter_avg: f(r, "jitter_avg"),
-            jitter_max: f(r, "jitter_max"),
-            jitter_std: f(r, "jitter_std"),
+            trajectory: Trajectory::of(r),
             shared_until_m: f(r, "shared_until_m"),
         })
         .collect();
@@ -875,7 +891,7 @@ pub fn tables(r: &Report) -> Vec<(String, Table)> {
             ("coverage_5m", true),
         ]);
         for x in &cl.rows {
-            t.push(vec![
+            let mut row = vec![
                 x.perturbation.clone(),
                 x.name.clone(),
                 x.runs.to_string(),
@@ -887,13 +903,10 @@ pub fn tables(r: &Report) -> Vec<(String, Table)> {
                     .join(";"),
                 x.outcomes.join(";"),
                 o(x.failure_rate),
-                o(x.cte_avg),
-                o(x.cte_max),
-                o(x.jitter_avg),
-                o(x.jitter_max),
-                o(x.jitter_std),
-                o(x.coverage_5m),
-            ]);
+            ];
+            row.extend(x.trajectory.cells());
+            row.push(o(x.coverage_5m));
+            t.push(row);
         }
         out.push((format!("rq3_{k}"), t));
         let mut h = Table::new(&[
@@ -967,7 +980,7 @@ pub fn tables(r: &Report) -> Vec<(String, Table)> {
             ("shared_until_m", true),
         ]);
         for x in rows {
-            t.push(vec![
+            let mut row = vec![
                 x.condition.clone(),
                 x.set.clone(),
                 x.completions
@@ -976,13 +989,10 @@ pub fn tables(r: &Report) -> Vec<(String, Table)> {
                     .collect::<Vec<_>>()
                     .join(";"),
                 x.outcomes.join(";"),
-                o(x.cte_avg),
-                o(x.cte_max),
-                o(x.jitter_avg),
-                o(x.jitter_max),
-                o(x.jitter_std),
-                o(x.shared_until_m),
-            ]);
+            ];
+            row.extend(x.trajectory.cells());
+            row.push(o(x.shared_until_m));
+            t.push(row);
         }
         out.push(("rq4".into(), t));
     }
