@@ -306,6 +306,26 @@ mod tests {
     }
 
     #[test]
+    fn a_camera_stream_takes_a_bit_depth_for_its_16_bit_samples() {
+        let with = |v: &str| {
+            GOOD.replace(
+                "seed = 7 }",
+                &format!("seed = 7 }}\n        bit_depth = {v}"),
+            )
+        };
+        let c = Config::parse(&with("12")).unwrap();
+        assert_eq!(c.streams[0].bit_depth, Some(12));
+        assert_eq!(Config::parse(GOOD).unwrap().streams[0].bit_depth, None);
+        let e = err(&with("17"));
+        assert!(
+            e.contains("streams[0] (cam).bit_depth") && e.contains("between 9 and 16"),
+            "{e}"
+        );
+        let e = err(&format!("{GOOD}bit_depth = 12\n"));
+        assert!(e.contains("streams[1] (lidar).bit_depth"), "{e}");
+    }
+
+    #[test]
     fn lidar_axes_reach_the_sensor_model() {
         let c = Config::parse(&format!("{GOOD}forward = \"+y\"\n")).unwrap();
         let m = c.streams[1].sensor_model().unwrap();

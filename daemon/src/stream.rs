@@ -47,6 +47,11 @@ pub struct StreamConfig {
     /// streams cannot take them.
     #[serde(default)]
     pub threads: Option<usize>,
+    /// Camera only: significant bits of 16-bit samples (`mono16`, `rgb16`, `bayer_*16`, ...),
+    /// 9..=16 (default 16): a 12-bit sensor stored in 16-bit containers is `bit_depth = 12`, so
+    /// its white maps to the working view's 255.
+    #[serde(default)]
+    pub bit_depth: Option<u8>,
     /// The perturbation active from the start (absent: frames are forwarded unchanged).
     #[serde(default)]
     pub perturbation: Option<PerturbationConfig>,
@@ -163,6 +168,14 @@ impl StreamConfig {
                         key("intensity_max")
                     ));
                 }
+                if let Some(b) = self.bit_depth
+                    && !(9..=16).contains(&b)
+                {
+                    return Err(format!(
+                        "{}: {b} must be between 9 and 16 (the significant bits of 16-bit samples)",
+                        key("bit_depth")
+                    ));
+                }
                 for (k, v) in [("forward", &self.forward), ("up", &self.up)] {
                     if v.is_some() {
                         return Err(format!("{}: only LiDAR streams have axes", key(k)));
@@ -174,6 +187,12 @@ impl StreamConfig {
                     return Err(format!(
                         "{}: missing; a LiDAR stream needs its sensor model (vlp32c, vlp16, hdl32e or hdl64e)",
                         key("sensor")
+                    ));
+                }
+                if self.bit_depth.is_some() {
+                    return Err(format!(
+                        "{}: only camera streams have a bit depth",
+                        key("bit_depth")
                     ));
                 }
                 SensorModel::by_name(self.sensor.as_deref().unwrap_or("vlp32c"))

@@ -3,6 +3,7 @@
 //! one-thread rayon pool for single-core figures).
 
 use crate::cloud::CloudView;
+use crate::encoding::{EncodedView, Scratch};
 use crate::error::Result;
 use crate::image::ImageView;
 use crate::perturber::{CameraPerturber, LidarPerturber};
@@ -86,6 +87,73 @@ pub fn time_camera(
         setup,
         &mut samples,
     ))
+}
+
+/// The conversion pair of a frame in a non-working encoding (medians over the timed frames).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ConversionTiming {
+    /// Into the working view (demosaic, YUV to RGB, 16 to 8 bits), median ms.
+    pub to_working_ms: f64,
+    /// Back into the frame's encoding, median ms.
+    pub write_back_ms: f64,
+    /// Both, per frame, median ms.
+    pub pair_ms: f64,
+    /// The perturbation alone on the working view, median ms.
+    pub perturbation_ms: f64,
+}
+
+/// Times `frames` applications of a camera perturbation to a frame in any encoding (see
+/// [`crate::encoding`]), after one untimed warm-up frame: the [`Timing`] of the whole (working
+/// view, perturbation, write-back) and the conversion pair's share.
+pub fn time_camera_encoded(
+    entry: &'static Entry,
+    severity: u8,
+    seed: u64,
+    input: &EncodedView<'_>,
+    frames: usize,
+) -> Result<(Timing, ConversionTiming)> {
+    let mut p = CameraPerturber::new(entry.id, severity, seed)?;
+    let t0 = Instant::now();
+    p.prepare(input.working_geometry())?;
+    let setup = t0.elapsed();
+    let mut scratch = Scratch::new();
+    let mut work_out = crate::image::Image::with_geometry(input.working_geometry());
+    let mut out = vec![0u8; input.data().len()];
+    let mut phases = [Vec::new(), Vec::new(), Vec::new()];
+    let mut whole = Vec::with_capacity(frames);
+    for seq in std::iter::once(u64::MAX / 2).chain(0..frames as u64) {
+        let t0 = Instant::now();
+        let working = scratch.to_working(input);
+        let t1 = Instant::now();
+        p.apply(&working, &mut work_out.view_mut(), seq)?;
+        let t2 = Instant::now();
+        scratch.from_working(input, &work_out.view(), &mut out)?;
+        let t3 = Instant::now();
+        if seq != u64::MAX / 2 {
+            for (v, d) in phases.iter_mut().zip([t1 - t0, t2 - t1, t3 - t2]) {
+                v.push(d);
+            }
+            whole.push(t3 - t0);
+        }
+    }
+    let median = |v: &mut Vec<Duration>| {
+        v.sort();
+        crate::percentile::of_sorted(v, 0.5).map_or(0.0, |d| d.as_secs_f64() * 1e3)
+    };
+    let mut pairs: Vec<Duration> = phases[0]
+        .iter()
+        .zip(&phases[2])
+        .map(|(a, b)| *a + *b)
+        .collect();
+    let [to, perturb, back] = &mut phases;
+    let conversion = ConversionTiming {
+        to_working_ms: median(to),
+        write_back_ms: median(back),
+        pair_ms: median(&mut pairs),
+        perturbation_ms: median(perturb),
+    };
+    let timing = summarize(entry.id, entry.name, severity, setup, &mut whole);
+    Ok((timing, conversion))
 }
 
 /// Times `frames` applications of a LiDAR perturbation to `input`, writing into one reused

@@ -37,11 +37,27 @@ pub enum Error {
         /// What is wrong.
         reason: String,
     },
-    /// The pixel encoding is not one the project handles.
-    #[error("unsupported pixel encoding `{encoding}` (supported: rgb8, bgr8, rgba8, bgra8, mono8)")]
+    /// The pixel encoding is not one the project handles (the supported ones are the rows of
+    /// [`crate::encoding::ENCODINGS`]).
+    #[error(
+        "unsupported pixel encoding `{encoding}` (supported: {})",
+        crate::encoding::supported()
+    )]
     UnsupportedEncoding {
         /// The encoding string as received.
         encoding: String,
+    },
+    /// A field of an image holds a value its encoding does not allow.
+    #[error("invalid {encoding} image: {field} {value} {problem}")]
+    ImageField {
+        /// The encoding, as the table names it.
+        encoding: &'static str,
+        /// The field.
+        field: crate::encoding::ImageField,
+        /// Its value.
+        value: u64,
+        /// What is wrong with it.
+        problem: crate::encoding::FieldProblem,
     },
     /// A perturbation cannot work on this pixel format.
     #[error("{id} does not support pixel format {format}")]

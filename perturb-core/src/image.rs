@@ -90,21 +90,19 @@ impl PixelFormat {
         }
     }
 
-    /// Parses a `sensor_msgs/Image` encoding string (`8UC1`, `8UC3` and `8UC4` are read as mono8,
-    /// bgr8 and bgra8, the OpenCV defaults).
+    /// Parses a `sensor_msgs/Image` encoding string through the encoding table
+    /// ([`crate::encoding::ENCODINGS`]; `8UC1`, `8UC3` and `8UC4` are mono8, bgr8 and bgra8, the
+    /// OpenCV defaults). Encodings of the table that are not 8-bit working layouts (Bayer, YUV,
+    /// 16-bit) are an error here: frames in them go through [`crate::encoding::EncodedView`].
     pub fn from_ros_encoding(encoding: &str) -> Result<Self> {
-        Ok(match encoding {
-            "rgb8" => PixelFormat::Rgb8,
-            "bgr8" | "8UC3" => PixelFormat::Bgr8,
-            "rgba8" => PixelFormat::Rgba8,
-            "bgra8" | "8UC4" => PixelFormat::Bgra8,
-            "mono8" | "8UC1" => PixelFormat::Mono8,
-            other => {
-                return Err(Error::UnsupportedEncoding {
-                    encoding: other.to_string(),
-                });
-            }
-        })
+        let e = crate::encoding::Encoding::find(encoding)?;
+        if e.is_working() {
+            return Ok(e.working_format());
+        }
+        Err(Error::image(format!(
+            "`{encoding}` is not one of the 8-bit working layouts (rgb8, bgr8, rgba8, bgra8, mono8): \
+             read it as a perturb_core::encoding::EncodedView, which converts it"
+        )))
     }
 }
 
@@ -293,6 +291,11 @@ impl<'a> ImageViewMut<'a> {
     pub fn row(&self, y: usize) -> &[u8] {
         let start = y * self.stride;
         &self.data[start..start + self.width as usize * self.format.channels()]
+    }
+
+    /// The underlying bytes, padding included (for writers that go row by row themselves).
+    pub fn data_mut(&mut self) -> &mut [u8] {
+        self.data
     }
 
     /// A read-only view of the same bytes.
@@ -555,8 +558,14 @@ mod tests {
         for f in PixelFormat::ALL {
             assert_eq!(PixelFormat::from_ros_encoding(f.ros_encoding()).unwrap(), f);
         }
+        let err = PixelFormat::from_ros_encoding("nv21").unwrap_err();
+        assert!(err.to_string().contains("nv21"));
         let err = PixelFormat::from_ros_encoding("yuv422").unwrap_err();
-        assert!(err.to_string().contains("yuv422"));
+        assert!(err.to_string().contains("EncodedView"), "{err}");
+        assert_eq!(
+            PixelFormat::from_ros_encoding("8UC3").unwrap(),
+            PixelFormat::Bgr8
+        );
     }
 
     #[test]

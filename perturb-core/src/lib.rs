@@ -12,6 +12,7 @@
 pub mod bench;
 pub mod camera;
 pub mod cloud;
+pub mod encoding;
 pub mod error;
 pub mod formats;
 pub mod image;

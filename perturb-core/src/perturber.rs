@@ -18,6 +18,7 @@
 use crate::camera::{CameraPerturbation, CameraSetup};
 use crate::cloud::{Cloud, CloudView};
 use crate::detector::{Detector, DetectorConfig};
+use crate::encoding::{EncodedView, Scratch};
 use crate::error::{Error, Result};
 use crate::image::{Image, ImageGeometry, ImageView, ImageViewMut};
 use crate::lidar::points::CloudShape;
@@ -145,6 +146,29 @@ impl CameraPerturber {
     pub fn apply_owned(&mut self, input: &ImageView<'_>, seq: u64) -> Result<Image> {
         let mut out = Image::with_geometry(input.geometry());
         self.apply(input, &mut out.view_mut(), seq)?;
+        Ok(out)
+    }
+
+    /// Perturbs a frame in any encoding of [`crate::encoding::ENCODINGS`] into `out` (at least
+    /// [`EncodedView::len`] bytes), in the frame's own encoding, size, step and byte order: the
+    /// perturbation runs on the frame's 8-bit working view and the result is written back (see
+    /// [`crate::encoding`]); bytes that are not pixels (row padding) are copied from `input`.
+    /// `scratch` holds the conversion buffers, reused from frame to frame. For the working
+    /// layouts this is [`CameraPerturber::apply`] straight into `out`.
+    pub fn apply_encoded(
+        &mut self,
+        input: &EncodedView<'_>,
+        out: &mut [u8],
+        seq: u64,
+        scratch: &mut Scratch,
+    ) -> Result<()> {
+        scratch.perturb(input, out, |i, o| self.apply(i, o, seq))
+    }
+
+    /// [`CameraPerturber::apply_encoded`] into a new buffer as long as the input's data.
+    pub fn apply_encoded_owned(&mut self, input: &EncodedView<'_>, seq: u64) -> Result<Vec<u8>> {
+        let mut out = vec![0; input.data().len()];
+        self.apply_encoded(input, &mut out, seq, &mut Scratch::new())?;
         Ok(out)
     }
 }

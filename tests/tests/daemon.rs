@@ -456,8 +456,8 @@ fn invalid_frames_are_counted_and_skipped_and_the_stream_goes_on() {
     let img = camera_frame(1);
     let h = FrameHeader::for_image_view(1, stamp(1), "camera_front", &img.view()).unwrap();
     p.cam.publish_raw(h, &img.data[..100]).unwrap();
-    // An encoding the perturbations do not support.
-    let mut h = FrameHeader::image(2, stamp(2), "camera_front", W, H, W * 2, "yuv422").unwrap();
+    // An encoding the encoding table does not have (NV21, 4:2:0).
+    let mut h = FrameHeader::image(2, stamp(2), "camera_front", W, H, W * 2, "nv21").unwrap();
     h.data_len = (W * 2 * H) as u64;
     p.cam
         .publish_raw(h, &vec![0u8; (W * 2 * H) as usize])

@@ -43,7 +43,7 @@ fn reads_the_kitti_bag_in_log_time_order_and_decodes_its_sensors() {
                 Some(Ok(SensorMessage::Image(img))) => {
                     let v = img.view().unwrap();
                     assert_eq!(
-                        (v.width, v.height, v.format),
+                        (v.width, v.height, v.encoding.working_format()),
                         (1242, 375, PixelFormat::Rgb8)
                     );
                     images += 1;

@@ -116,7 +116,9 @@ metric pairs, and the overlap of the top --top-k pairs of the two rankings (larg
 except retention, completion and coverage_5m).
 
 Defaults: offline mse, max_abs_deviation, retention_loss, ate; closed-loop failure_rate,
-cte_avg, jitter_avg, coverage_5m, completion (those present in the tables)."
+cte_avg, jitter_avg, coverage_5m, completion (those present in the tables). A metric pair over
+fewer than 5 matched pairs gets no confidence interval and a note saying so. With --latency
+BENCH only the pairs within their latency budget are matched (the paper's feasible pairs)."
     )]
     Transfer(TransferArgs),
     /// Fine-tuned vs baseline (RQ4): two or more sets of runs per condition in one table.
@@ -304,6 +306,11 @@ struct TransferArgs {
     /// Closed-loop metrics to test (repeatable).
     #[arg(long)]
     closed_loop_metric: Vec<String>,
+    /// A latency table (perturb bench --json, or CSV with mean_ms): only the (perturbation,
+    /// severity) pairs whose average latency is within their budget (33 ms camera, 200 ms
+    /// LiDAR) are matched, as the paper does.
+    #[arg(long, value_name = "BENCH")]
+    latency: Option<PathBuf>,
     /// Bootstrap resamples.
     #[arg(long, default_value_t = 10_000)]
     resamples: usize,
@@ -675,8 +682,27 @@ fn transfer(t: TransferArgs) -> Result<()> {
     if t.resamples == 0 {
         bail!("--resamples must be at least 1");
     }
-    let off = read_table(&t.offline)?;
+    let mut off = read_table(&t.offline)?;
     let cl = read_table(&t.closed_loop)?;
+    if let Some(bench) = &t.latency {
+        let left_out = perturb_study::transfer::keep_feasible(&mut off, &read_table(bench)?);
+        eprintln!(
+            "{} (perturbation, severity) pair(s) left out as over their latency budget{}",
+            left_out.len(),
+            if left_out.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    ": {}",
+                    left_out
+                        .iter()
+                        .map(|(id, s)| format!("{id} s{s}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }
+        );
+    }
     let res = transfer(
         &off,
         &cl,
@@ -693,7 +719,9 @@ fn transfer(t: TransferArgs) -> Result<()> {
         "{} (perturbation, severity) pairs in both tables; {} resamples from seed {}",
         res.matched, res.resamples, res.seed
     );
-    for r in res.rows.iter().filter(|r| r.note.is_some()) {
+    // The text and markdown tables carry the notes themselves.
+    let machine = matches!(t.format, Format::Json | Format::Csv);
+    for r in res.rows.iter().filter(|r| machine && r.note.is_some()) {
         eprintln!(
             "note: {} vs {}: {}",
             r.offline,

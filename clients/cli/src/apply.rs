@@ -21,7 +21,12 @@ encoding, a bag keeps every topic; messages of the other modality are copied unc
 input (.bag, or ROS 1 profile MCAP) gives a ROS 1 .bag: OUT if it ends in .bag, else OUT/OUT.bag;
 a rosbag2 input gives a rosbag2 bag directory. For a
 bag, the sequence number of a message is its index on its topic plus --seq, and a
-/perturb/events topic records which perturbation was applied to each frame.")]
+/perturb/events topic records which perturbation was applied to each frame.
+
+Images in a bag may have any encoding of the encoding table (`perturb info` names it; Bayer
+8/16 bit, YUV 4:2:2, mono16, rgb16, ... see docs/encodings.md): they are perturbed through an
+8-bit working view and written back in their own encoding, size, step and byte order, the same
+bytes perturbd writes for the same frame.")]
 pub struct Args {
     /// Perturbation ID or name (see `perturb list`).
     #[arg(long)]
@@ -47,6 +52,10 @@ pub struct Args {
     /// For bags: only perturb these topics (repeatable; default all topics of the perturbation's modality).
     #[arg(long)]
     topic: Vec<String>,
+    /// For bags: significant bits of 16-bit image samples (mono16, bayer_*16, ...), 9..16
+    /// (default 16; 12 for a 12-bit sensor stored in 16-bit containers).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(9..=16))]
+    bit_depth: Option<u8>,
     /// Input: .png .jpg .bin (KITTI) .pcd.bin (nuScenes) .pcd, a rosbag2 .mcap file or directory, or a ROS 1 .bag.
     input: PathBuf,
     /// Output file (same format as the input), or for a bag the output bag directory.
@@ -64,6 +73,9 @@ pub fn run(a: Args) -> Result<()> {
     };
     if in_kind == FileKind::Mcap {
         return apply_bag(&a, spec);
+    }
+    if a.bit_depth.is_some() {
+        bail!("--bit-depth applies to 16-bit image messages in bags, not to image files");
     }
     let out_kind = FileKind::from_path(&a.output)?;
     if out_kind != in_kind {
@@ -123,13 +135,17 @@ fn apply_bag(a: &Args, spec: Spec) -> Result<()> {
         a.intensity_max,
     )?;
     eprintln!("{}", describe_sensor(&sensor));
-    perturb_study::perturb_bag::perturb_bag(
+    let options = perturb_study::perturb_bag::BagOptions {
+        seq_offset: a.seq,
+        sensor,
+        topics: a.topic.clone(),
+        bit_depth: a.bit_depth,
+    };
+    perturb_study::perturb_bag::perturb_bag_with(
         &bag,
         &a.output,
         spec,
-        a.seq,
-        &sensor,
-        &a.topic,
+        &options,
         &crate::progress::Notes,
     )?;
     Ok(())

@@ -1,7 +1,8 @@
 //! `perturb bench`: latency of every perturbation at every severity on a real frame or scan.
 
 use anyhow::{Context, Result, bail};
-use perturb_core::bench::{Timing, time_camera, time_lidar};
+use perturb_core::bench::{ConversionTiming, Timing, time_camera, time_camera_encoded, time_lidar};
+use perturb_core::encoding::{ENCODINGS, EncodedView, Encoding, from_image};
 use perturb_core::image::resize_bilinear;
 use perturb_core::registry::{Modality, of_modality};
 use perturb_study::Format;
@@ -15,9 +16,16 @@ use std::path::PathBuf;
   perturb bench --modality camera --width 800 --height 503 --json
   perturb bench --modality lidar --input scan.bin --threads 2
   perturb bench --modality camera --hil drive.mcap --window 10 --format markdown
+  perturb bench --modality camera --encoding bayer_rggb8 --width 2064 --height 1544 --id C-C4
+  perturb bench --modality camera --encoding all --id C-C4
 
 Without --input the real KITTI frame or scan in ../shared/data is used. Times are per frame,
 after a warm-up frame; setup (tables, textures, particle sets) is reported separately.
+
+With --encoding E the frame is first made into encoding E (a Bayer mosaic, YUV 4:2:2, 16-bit
+samples; `all` for every encoding that is not a working layout) and each frame is timed through
+its working view: the table's times are the whole (conversion, perturbation, write-back), and a
+line per encoding gives the conversion pair's median beside the perturbation's.
 
 With --hil BAG the table is measured in the live pipeline instead: the bag is replayed (looped,
 original timing) through perturb-bridge and perturbd (started as child processes, which must
@@ -76,6 +84,10 @@ pub struct Args {
     /// Report format.
     #[arg(long, value_enum, default_value_t = Format::Table)]
     format: Format,
+    /// Camera: time frames in this encoding (repeatable; `all`: every encoding that is not a
+    /// working layout), converted to the working view and back around the perturbation.
+    #[arg(long = "encoding")]
+    encodings: Vec<String>,
 }
 
 /// How many worker threads a perturbation needs for its median frame to fit the budget.
@@ -132,6 +144,12 @@ struct Row<'a> {
     /// --hil: frames the daemon dropped during the window.
     #[serde(skip_serializing_if = "Option::is_none")]
     dropped: Option<u64>,
+    /// --encoding: the frame's encoding.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    encoding: Option<&'static str>,
+    /// --encoding: the conversion pair's medians.
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    conversion: Option<ConversionTiming>,
 }
 
 /// What only --hil measures.
@@ -199,6 +217,10 @@ pub fn run(a: Args) -> Result<()> {
                 a.height,
                 a.threads
             );
+            if !a.encodings.is_empty() {
+                let encodings = chosen_encodings(&a.encodings)?;
+                return bench_encodings(&a, budget, format, &pool, &frame, &encodings);
+            }
             let entries = of_modality(Modality::Camera).filter(|e| selected(e.id));
             (rows, fits) = time_all(entries, &a, budget, &pool, |e, s, pool| {
                 pool.install(|| time_camera(e, s, 1, &frame.view(), a.frames))
@@ -234,6 +256,112 @@ pub fn run(a: Args) -> Result<()> {
         ),
     }
     print_report(&rows, budget, format, None, &fits)
+}
+
+/// The encodings `--encoding` names (`all`: every encoding that is not a working layout).
+fn chosen_encodings(names: &[String]) -> Result<Vec<&'static Encoding>> {
+    let mut out = Vec::new();
+    for n in names {
+        if n == "all" {
+            out.extend(ENCODINGS.iter().filter(|e| !e.is_working()));
+        } else {
+            out.push(Encoding::find(n)?);
+        }
+    }
+    Ok(out)
+}
+
+/// `--encoding`: every selected perturbation timed on `frame` made into each encoding, through
+/// its working view; the conversion pair's cost per encoding beside the perturbation's.
+fn bench_encodings(
+    a: &Args,
+    budget: f64,
+    format: Format,
+    pool: &rayon::ThreadPool,
+    frame: &perturb_core::image::Image,
+    encodings: &[&'static Encoding],
+) -> Result<()> {
+    let selected = |id: &str| a.ids.is_empty() || a.ids.iter().any(|i| i.eq_ignore_ascii_case(id));
+    let (mut rows, mut conv, mut names) = (Vec::new(), Vec::new(), Vec::new());
+    let mut lines = Vec::new();
+    for &e in encodings {
+        let step = e.row_bytes(frame.width);
+        let data = from_image(&frame.view(), e, step, false)?;
+        let input = EncodedView::new(&data, frame.width, frame.height, step, e, false)?;
+        let first = rows.len();
+        for entry in of_modality(Modality::Camera).filter(|x| selected(x.id)) {
+            for s in entry.severities() {
+                let (t, c) = pool
+                    .install(|| time_camera_encoded(entry, s, 1, &input, a.frames))
+                    .with_context(|| format!("{} severity {s} on {e}", entry.id))?;
+                rows.push(t);
+                conv.push(c);
+                names.push(e.name);
+            }
+        }
+        let mid = |f: fn(&ConversionTiming) -> f64| {
+            let mut v: Vec<f64> = conv[first..].iter().map(f).collect();
+            if v.is_empty() {
+                0.0
+            } else {
+                perturb_core::percentile::of_f64(&mut v, 0.5)
+            }
+        };
+        lines.push(format!(
+            "{:<13} {}x{}: conversion pair {:.2} ms (to {} {:.2} ms, back {:.2} ms) beside the perturbation's {:.2} ms (medians over {} rows)",
+            e.name,
+            frame.width,
+            frame.height,
+            mid(|c| c.pair_ms),
+            e.working_format(),
+            mid(|c| c.to_working_ms),
+            mid(|c| c.write_back_ms),
+            mid(|c| c.perturbation_ms),
+            rows.len() - first
+        ));
+    }
+    if format == Format::Json {
+        let out: Vec<Row<'_>> = rows
+            .iter()
+            .enumerate()
+            .map(|(i, t)| Row {
+                timing: t,
+                threads_to_fit: None,
+                budget_ms: budget,
+                fits_budget: t.max_ms <= budget,
+                node_overhead_ms: None,
+                dropped: None,
+                encoding: Some(names[i]),
+                conversion: Some(conv[i]),
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    for l in &lines {
+        println!("{l}");
+    }
+    if format == Format::Csv {
+        println!(
+            "encoding,id,severity,whole_median_ms,perturbation_ms,to_working_ms,write_back_ms,pair_ms"
+        );
+        for ((t, c), n) in rows.iter().zip(&conv).zip(&names) {
+            println!(
+                "{n},{},{},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                t.id,
+                t.severity,
+                t.median_ms,
+                c.perturbation_ms,
+                c.to_working_ms,
+                c.write_back_ms,
+                c.pair_ms
+            );
+        }
+        return Ok(());
+    }
+    println!("(the table: the whole frame, conversion and perturbation together)");
+    print_table(&rows, budget, format == Format::Markdown, None, &[]);
+    Ok(())
 }
 
 /// Times every severity of `entries` on `pool` with `time`, and with `--fit-threads` the threads
@@ -342,6 +470,8 @@ fn print_json(
             fits_budget: t.max_ms <= budget,
             node_overhead_ms: live.map(|l| l.overhead_ms),
             dropped: live.and_then(|l| l.dropped.get(i).copied()),
+            encoding: None,
+            conversion: None,
         })
         .collect();
     println!("{}", serde_json::to_string_pretty(&out)?);

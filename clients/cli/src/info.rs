@@ -125,7 +125,7 @@ fn describe(m: &perturb_bag::BagMessage<'_>) -> std::result::Result<Option<Strin
     Ok(match m.decode() {
         Some(Ok(SensorMessage::Image(img))) => {
             let v = img.view().map_err(|e| invalid(&e))?;
-            Some(format!("image {}x{} {}", v.width, v.height, v.format))
+            Some(describe_image(&v, img.encoding))
         }
         Some(Ok(SensorMessage::Compressed(c))) => Some(format!(
             "compressed image ({}, {} bytes)",
@@ -144,4 +144,34 @@ fn describe(m: &perturb_bag::BagMessage<'_>) -> std::result::Result<Option<Strin
         Some(Err(e)) => return Err(e.to_string()),
         None => None,
     })
+}
+
+/// What an image message's encoding is, as the encoding table describes it: its name (and the
+/// alias the message used), its layout, step and byte order, and the working view perturbations
+/// run on.
+fn describe_image(v: &perturb_core::encoding::EncodedView<'_>, written: &str) -> String {
+    let e = v.encoding;
+    let name = if written == e.name {
+        e.name.to_string()
+    } else {
+        format!("{written} (= {})", e.name)
+    };
+    let order = if e.bits == 16 {
+        if v.big_endian {
+            ", big-endian"
+        } else {
+            ", little-endian"
+        }
+    } else {
+        ""
+    };
+    let work = if e.is_working() {
+        "perturbed in place".to_string()
+    } else {
+        format!("perturbed through an {} view", e.working_format())
+    };
+    format!(
+        "image {}x{} {name}: {}, {} bits{order}, step {}; {work}",
+        v.width, v.height, e.summary, e.bits, v.step
+    )
 }

@@ -20,6 +20,7 @@ mod list;
 mod metrics;
 mod pipeline;
 mod progress;
+mod report;
 
 use clap::{Parser, Subcommand};
 
@@ -58,6 +59,8 @@ enum Command {
     /// The closed loop (RQ3, RQ4): completion, failures, CTE, jitter, coverage of recorded runs;
     /// transfer analysis; fine-tuned vs baseline.
     Analyze(Box<analyze::Args>),
+    /// The paper's tables and figures in one self-contained HTML page, from a study folder.
+    Report(report::Args),
     /// Run the LiDAR clustering detector on one point-cloud file and print its boxes.
     Detect(detect::Args),
     /// Show what a file holds (image, point cloud, or a bag's topics) and check that it decodes.
@@ -95,6 +98,7 @@ fn main() {
         Command::Augment(a) => augment::run(a),
         Command::Metrics(a) => metrics::run(a),
         Command::Analyze(a) => analyze::run(*a),
+        Command::Report(a) => report::run(a),
         Command::Detect(a) => detect::run(a),
         Command::Info(a) => info::run(a),
         Command::Bench(a) => bench::run(a),

@@ -324,7 +324,7 @@ fn compare_puts_two_sets_side_by_side_per_condition() {
     );
     assert_eq!(rows[2][4], "ok;ok");
     assert_eq!(rows[3][4], "C;C");
-    // CTE over every run (failing ones up to the failure): 0.6 m in mud for both.
+    // CTE over the shared non-failing portion (the default): 0.6 m in mud for both.
     for r in &rows[2..] {
         assert!((r[5].parse::<f64>().unwrap() - 0.6).abs() < 0.01, "{r:?}");
     }
@@ -491,4 +491,100 @@ fn svg_texts(svg: &str) -> Vec<String> {
             Some(body[..body.find("</text>")?].trim().to_string())
         })
         .collect()
+}
+
+/// Before: without a route, a run that left the road by 3 m was `[ok]` with failure rate 0.00.
+/// Now it is unjudged in every output, counted apart, with the reason; with the route it is a
+/// road departure.
+#[test]
+fn runs_that_cannot_be_judged_are_unjudged_in_every_output() {
+    let d = tmp("analyze-unjudged");
+    let runs = d.join("runs");
+    std::fs::create_dir_all(&runs).unwrap();
+    let mut off = Run::new("off_road", route_length() / 10.0 + 1.0);
+    off.offset = Box::new(|s, _| if s < 30.0 { 0.0 } else { 3.0 });
+    off.write(&runs);
+    let o = perturb(&["analyze", s(&runs), "--pose-topic", "/odom"]);
+    assert!(o.status.success());
+    let out = String::from_utf8_lossy(&o.stdout);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(out.contains("unjudged") && out.contains("[?]"), "{out}");
+    assert!(!out.contains("[ok]"), "{out}");
+    assert!(
+        err.contains("1 run analysed: 0 ok, 0 failed, 1 unjudged") && err.contains("no route"),
+        "{err}"
+    );
+    let json = ok(&["analyze", s(&runs), "--pose-topic", "/odom", "--json"]);
+    let v: Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(v["runs"][0]["outcome"], "unjudged");
+    assert_eq!(v["perturbations"][0]["failure_rate"], Value::Null);
+    assert_eq!(v["summary"]["unjudged"], 1);
+    let route = d.join("route.csv");
+    write_route(&route);
+    let json = ok(&[
+        "analyze",
+        s(&runs),
+        "--pose-topic",
+        "/odom",
+        "--route",
+        s(&route),
+        "--json",
+    ]);
+    let v: Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(v["runs"][0]["outcome"], "failed");
+    assert_eq!(v["runs"][0]["failure"], "road_departure");
+}
+
+/// Transfer over 2 pairs says so instead of printing CI [1.00, 1.00]; --latency leaves out the
+/// pairs over their budget.
+#[test]
+fn transfer_names_too_few_pairs_and_leaves_out_infeasible_ones() {
+    let d = tmp("analyze-transfer-few");
+    let off = d.join("off.csv");
+    std::fs::write(
+        &off,
+        "id,severity,mse\nC-A1,1,0.1\nC-A1,2,0.3\nC-B1,1,0.5\n",
+    )
+    .unwrap();
+    let cl = d.join("cl.csv");
+    std::fs::write(
+        &cl,
+        "perturbation,severity,cte_avg\nC-A1,1,0.5\nC-A1,2,0.7\nC-B1,1,0.9\n",
+    )
+    .unwrap();
+    let bench = d.join("bench.csv");
+    std::fs::write(
+        &bench,
+        "id,severity,mean_ms,max_ms,budget_ms\nC-A1,1,5,6,33\nC-A1,2,6,7,33\nC-B1,1,40,50,33\n",
+    )
+    .unwrap();
+    let o = perturb(&[
+        "analyze",
+        "transfer",
+        "--offline",
+        s(&off),
+        "--closed-loop",
+        s(&cl),
+        "--latency",
+        s(&bench),
+        "--resamples",
+        "100",
+    ]);
+    assert!(o.status.success());
+    let out = String::from_utf8_lossy(&o.stdout);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("1 (perturbation, severity) pair(s) left out") && err.contains("C-B1 s1"),
+        "{err}"
+    );
+    assert!(
+        err.contains("2 (perturbation, severity) pairs in both tables"),
+        "{err}"
+    );
+    assert!(
+        out.contains("note: mse vs cte_avg: only 2 matched pairs: fewer than 5"),
+        "{out}"
+    );
+    let row = out.lines().find(|l| l.starts_with("mse")).unwrap();
+    assert!(!row.contains("1.00  1.00"), "a CI over 2 pairs: {row}");
 }

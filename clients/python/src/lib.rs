@@ -17,6 +17,9 @@
 //! Built with maturin (`pip install clients/python`), which sets `PYO3_BUILD_EXTENSION_MODULE`
 //! so that the extension does not link libpython.
 
+mod encoded;
+mod report;
+
 use numpy::{
     IxDyn, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray,
     PyUntypedArrayMethods,
@@ -958,5 +961,8 @@ fn _perturb(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(input_is_copied, m)?)?;
     m.add_function(wrap_pyfunction!(plan_batch, m)?)?;
     m.add_function(wrap_pyfunction!(mark_done, m)?)?;
+    m.add_function(wrap_pyfunction!(report::report, m)?)?;
+    m.add_function(wrap_pyfunction!(encoded::encodings, m)?)?;
+    m.add_function(wrap_pyfunction!(encoded::apply_encoded, m)?)?;
     Ok(())
 }

@@ -19,7 +19,9 @@
 //! - [`transfer`]: Spearman's rho between offline and closed-loop metrics with bootstrap
 //!   confidence intervals, Benjamini-Hochberg q-values and top-k overlap;
 //! - [`hotspots`]: DBSCAN over failure positions and the trajectory map;
-//! - [`compare`]: two sets of runs (fine-tuned and baseline) per condition in one table.
+//! - [`compare`]: two sets of runs (fine-tuned and baseline) per condition in one table;
+//! - [`report`]: the paper's tables and figures in one self-contained HTML page, from the
+//!   outputs above ([`plot`] draws the charts and the map as SVG).
 //!
 //! Definitions and the choices where the paper is silent are in `docs/study.md`.
 
@@ -36,6 +38,7 @@ pub mod lidar_eval;
 pub mod perturb_bag;
 pub mod plot;
 pub mod progress;
+pub mod report;
 pub mod route;
 pub mod source;
 pub mod stats;

@@ -5,9 +5,9 @@ use crate::error::{Result, StudyError};
 use crate::progress::Progress;
 use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent, encode_string_for};
 use perturb_bag::{AnyWriter, Bag, BagFormat, Filter, SensorMessage};
+use perturb_core::encoding::Scratch;
 use perturb_core::formats::picture;
 use perturb_core::formats::ros::{CompressedImageMsg, Header, ImageMsg, PointCloud2Msg};
-use perturb_core::image::Image;
 use perturb_core::perturber::{CameraPerturber, LidarPerturber, Spec};
 use perturb_core::registry::Modality;
 use perturb_core::sensor_model::SensorModel;
@@ -31,9 +31,51 @@ pub fn perturb_bag(
     topics: &[String],
     progress: &dyn Progress,
 ) -> Result<u64> {
+    let options = BagOptions {
+        seq_offset,
+        sensor: sensor.clone(),
+        topics: topics.to_vec(),
+        bit_depth: None,
+    };
+    perturb_bag_with(bag, out, spec, &options, progress)
+}
+
+/// How [`perturb_bag_with`] treats a bag besides the perturbation.
+#[derive(Clone, Debug)]
+pub struct BagOptions {
+    /// Added to a message's index on its topic to give its sequence number.
+    pub seq_offset: u64,
+    /// The LiDAR sensor model.
+    pub sensor: SensorModel,
+    /// Topics to perturb (all topics of the perturbation's modality when empty).
+    pub topics: Vec<String>,
+    /// Significant bits of 16-bit image samples (`mono16`, `bayer_*16`, ...; default 16).
+    pub bit_depth: Option<u8>,
+}
+
+/// [`perturb_bag`] with every option. Images in any encoding of the encoding table
+/// (`perturb_core::encoding`: Bayer, YUV 4:2:2, 16-bit, ...) are perturbed through their working
+/// view and written back in their own encoding, size, step and byte order.
+pub fn perturb_bag_with(
+    bag: &Bag,
+    out: &Path,
+    spec: Spec,
+    options: &BagOptions,
+    progress: &dyn Progress,
+) -> Result<u64> {
+    let BagOptions {
+        seq_offset,
+        ref sensor,
+        ref topics,
+        bit_depth,
+    } = *options;
     let (mut w, format, channel, events) = open_output(bag, out)?;
     let mut camera = match spec.entry.modality {
-        Modality::Camera => Some(CameraPerturber::from_spec(spec)?),
+        Modality::Camera => Some(CameraJob {
+            perturber: CameraPerturber::from_spec(spec)?,
+            scratch: Scratch::new(),
+            bit_depth,
+        }),
         Modality::Lidar => None,
     };
     let mut lidar = match spec.entry.modality {
@@ -159,6 +201,14 @@ fn say_what_was_written(
 
 type HeaderOut = (i32, u32, String);
 
+/// A camera perturbation with its conversion buffers (reused from image to image) and the bit
+/// depth of 16-bit samples.
+struct CameraJob {
+    perturber: CameraPerturber,
+    scratch: Scratch,
+    bit_depth: Option<u8>,
+}
+
 /// Perturbs one decoded sensor message if it belongs to the perturbation's modality; returns the
 /// re-encoded message (in ROS 1 serialization with its header `seq` when `ros1_seq` is given,
 /// else CDR) and its header, or None to copy it unchanged.
@@ -166,28 +216,32 @@ fn perturb_message(
     msg: &SensorMessage<'_>,
     seq: u64,
     ros1_seq: Option<u32>,
-    camera: Option<&mut CameraPerturber>,
+    camera: Option<&mut CameraJob>,
     lidar: Option<&mut LidarPerturber>,
 ) -> perturb_core::Result<Option<(Vec<u8>, HeaderOut)>> {
     let hdr = |h: &Header<'_>| (h.stamp_sec, h.stamp_nanosec, h.frame_id.to_string());
     match (msg, camera, lidar) {
         (SensorMessage::Image(img), Some(cam), _) => {
-            let view = img.view()?;
-            let mut out = Image::from_vec(
-                vec![0; view.stride * view.height as usize],
-                view.width,
-                view.height,
-                view.stride,
-                view.format,
-            )?;
-            cam.apply(&view, &mut out.view_mut(), seq)?;
-            let m = ImageMsg::from_view(img.header, &out.view());
+            let mut view = img.view()?;
+            if let Some(bits) = cam.bit_depth
+                && view.encoding.bits == 16
+            {
+                view = view.with_bit_depth(bits)?;
+            }
+            // The same fields (encoding name, byte order, step), the perturbed data.
+            let mut data = vec![0; img.data.len()];
+            cam.perturber
+                .apply_encoded(&view, &mut data, seq, &mut cam.scratch)?;
+            let m = ImageMsg {
+                data: &data,
+                ..*img
+            };
             let bytes = ros1_seq.map_or_else(|| m.encode(), |s| m.encode_ros1(s));
             Ok(Some((bytes, hdr(&img.header))))
         }
         (SensorMessage::Compressed(c), Some(cam), _) => {
             let decoded = picture::decode(c.data)?;
-            let out = cam.apply_owned(&decoded.view(), seq)?;
+            let out = cam.perturber.apply_owned(&decoded.view(), seq)?;
             let data = if c.format.to_ascii_lowercase().contains("png") {
                 picture::encode_png(&out.view())?
             } else {

@@ -14,7 +14,7 @@
 
 use crate::error::{Result, StudyError};
 use crate::stats;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -171,6 +171,37 @@ fn read_csv(path: &Path, text: &str) -> Result<MetricTable> {
     Ok(t)
 }
 
+/// Leaves out of `offline` the (perturbation, severity) pairs whose measured latency
+/// (`mean_ms` of a `perturb bench` table) exceeds their budget (`budget_ms`, or 33 ms for camera
+/// and 200 ms for LiDAR perturbations): the paper matches only pairs that satisfy the latency
+/// constraints. Pairs without a latency are kept. Returns the pairs left out.
+pub fn keep_feasible(offline: &mut MetricTable, latency: &MetricTable) -> Vec<(String, u8)> {
+    let mut out = Vec::new();
+    offline.retain(|k, _| {
+        let Some(m) = latency.get(k) else {
+            return true;
+        };
+        let budget = m
+            .get("budget_ms")
+            .copied()
+            .unwrap_or_else(|| default_budget(&k.0));
+        let ok = m.get("mean_ms").is_none_or(|v| *v <= budget);
+        if !ok {
+            out.push(k.clone());
+        }
+        ok
+    });
+    out
+}
+
+/// The real-time budget of a perturbation: 33 ms per camera frame, 200 ms per LiDAR cloud.
+pub fn default_budget(id: &str) -> f64 {
+    match perturb_core::registry::find(id).map(|e| e.modality) {
+        Ok(perturb_core::registry::Modality::Lidar) => 200.0,
+        _ => 33.0,
+    }
+}
+
 /// How the transfer analysis runs.
 #[derive(Clone, Debug)]
 pub struct TransferConfig {
@@ -202,7 +233,7 @@ impl Default for TransferConfig {
 }
 
 /// One tested (offline metric, closed-loop metric) pair.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TransferRow {
     /// The offline metric.
     pub offline: String,
@@ -229,13 +260,15 @@ pub struct TransferRow {
     /// The closed-loop ranking's top k.
     pub top_closed_loop: Vec<String>,
     /// The matched pairs (for scatter plots).
+    #[serde(default)]
     pub points: Vec<TransferPoint>,
     /// What a reader must know about this row (too few pairs, a constant side).
+    #[serde(default)]
     pub note: Option<String>,
 }
 
 /// One matched (perturbation, severity) pair of a row.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TransferPoint {
     /// Perturbation ID.
     pub perturbation: String,
@@ -248,7 +281,7 @@ pub struct TransferPoint {
 }
 
 /// The whole analysis.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Transfer {
     /// (perturbation, severity) pairs present in both tables.
     pub matched: usize,

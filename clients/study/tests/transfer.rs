@@ -267,3 +267,62 @@ fn tables_without_common_pairs_or_metrics_are_refused_by_name() {
     assert!(e.contains("c.csv") && e.contains("`id`"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Before: with 2 pairs, rho 1.00 and CI [1.00, 1.00] without a word. Now a row over fewer than
+/// 5 pairs has no interval and says why; from 5 pairs on the interval is estimated.
+#[test]
+fn fewer_than_five_pairs_give_no_interval_and_a_note() {
+    let dir = std::env::temp_dir().join(format!("perturb-transfer-few-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let off = dir.join("off.csv");
+    std::fs::write(
+        &off,
+        "id,severity,mse\nC-A1,1,0.1\nC-A1,2,0.3\nC-A1,3,0.5\nC-A1,4,0.6\nC-A1,5,0.9\n",
+    )
+    .unwrap();
+    let two = dir.join("two.csv");
+    std::fs::write(
+        &two,
+        "perturbation,severity,cte_avg\nC-A1,1,0.2\nC-A1,2,0.4\n",
+    )
+    .unwrap();
+    let five = dir.join("five.csv");
+    std::fs::write(
+        &five,
+        "perturbation,severity,cte_avg\nC-A1,1,0.2\nC-A1,2,0.4\nC-A1,3,0.3\nC-A1,4,0.8\nC-A1,5,0.9\n",
+    )
+    .unwrap();
+    let cfg = TransferConfig {
+        resamples: 500,
+        ..TransferConfig::default()
+    };
+    let t = transfer(&read_table(&off).unwrap(), &read_table(&two).unwrap(), &cfg).unwrap();
+    let r = &t.rows[0];
+    assert_eq!((r.n, r.rho), (2, Some(1.0)));
+    assert_eq!((r.ci_low, r.ci_high, r.p), (None, None, None));
+    let note = r.note.as_deref().unwrap();
+    assert!(
+        note.contains("only 2 matched pairs") && note.contains("fewer than 5"),
+        "{note}"
+    );
+    assert_eq!(r.points.len(), 2);
+    let text = perturb_study::transfer::render(&t, perturb_study::Format::Table);
+    assert!(
+        text.contains("note: mse vs cte_avg: only 2 matched pairs"),
+        "{text}"
+    );
+    let t = transfer(
+        &read_table(&off).unwrap(),
+        &read_table(&five).unwrap(),
+        &cfg,
+    )
+    .unwrap();
+    let r = &t.rows[0];
+    assert_eq!(r.n, 5);
+    assert!(
+        r.ci_low.is_some() && r.ci_high.is_some() && r.note.is_none(),
+        "{r:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -20,6 +20,7 @@
 use crate::error::{WireError, WireResult};
 use iceoryx2::prelude::ZeroCopySend;
 use perturb_core::cloud::{CloudView, Datatype, PointField, PointLayout};
+use perturb_core::encoding::{EncodedView, Encoding};
 use perturb_core::image::{ImageView, ImageViewMut, PixelFormat};
 use perturb_core::perturber::Spec;
 use std::sync::Arc;
@@ -273,8 +274,9 @@ pub struct Applied {
 
 impl FrameHeader {
     /// A header for an image of `width` x `height` pixels, rows `step` bytes apart, in the ROS
-    /// `encoding` (any string up to [`ENCODING_LEN`] bytes; the daemon perturbs the encodings
-    /// [`PixelFormat`] knows and refuses the others).
+    /// `encoding` (any string up to [`ENCODING_LEN`] bytes; the daemon perturbs the encodings of
+    /// [`perturb_core::encoding::ENCODINGS`] and refuses the others). Set `is_bigendian` for
+    /// big-endian 16-bit data.
     pub fn image(
         seq: u64,
         stamp: Stamp,
@@ -488,19 +490,25 @@ impl FrameHeader {
         }
     }
 
-    /// The pixel format of an image frame (a clear error for encodings the project does not
-    /// handle).
+    /// The pixel format of an image frame in one of the 8-bit working layouts (a clear error
+    /// for other encodings; [`FrameHeader::image_encoding`] reads every encoding).
     pub fn pixel_format(&self) -> WireResult<PixelFormat> {
         Ok(PixelFormat::from_ros_encoding(self.encoding()?)?)
     }
 
+    /// The image encoding's row of the encoding table (a clear error naming an encoding the
+    /// project does not handle).
+    pub fn image_encoding(&self) -> WireResult<&'static Encoding> {
+        Ok(Encoding::find(self.encoding()?)?)
+    }
+
     /// Bytes an image with this header's geometry occupies (last row without padding).
     pub fn image_len(&self) -> WireResult<usize> {
-        let f = self.pixel_format()?;
+        let e = self.image_encoding()?;
         Ok(image_bytes(
             self.height,
             self.step as usize,
-            self.width as usize * f.channels(),
+            e.row_bytes(self.width),
         ))
     }
 
@@ -518,23 +526,14 @@ impl FrameHeader {
         self.frame_id()?;
         match m {
             WireModality::Camera => {
-                let f = self.pixel_format()?;
-                let row = self.width as usize * f.channels();
-                if (self.step as usize) < row {
-                    return Err(WireError::invalid(format!(
-                        "image step {} is smaller than width {} x {} bytes per pixel",
-                        self.step,
-                        self.width,
-                        f.channels()
-                    )));
-                }
-                let need = image_bytes(self.height, self.step as usize, row);
-                if (self.data_len as usize) < need {
-                    return Err(WireError::invalid(format!(
-                        "{}x{} {f} with step {} needs {need} bytes but the header says {} are valid",
-                        self.width, self.height, self.step, self.data_len
-                    )));
-                }
+                // The encoding table checks the encoding, the tile (even sizes for Bayer and
+                // YUV), the step and that `data_len` holds the rows; errors name the field.
+                self.image_encoding()?.check(
+                    self.width,
+                    self.height,
+                    self.step as usize,
+                    self.data_len as usize,
+                )?;
             }
             WireModality::Lidar => {
                 let layout = self.point_layout()?;
@@ -612,6 +611,20 @@ impl FrameHeader {
             self.height,
             self.step as usize,
             self.pixel_format()?,
+        )?)
+    }
+
+    /// A view of the image in its own encoding over `payload` (in place), checked against the
+    /// encoding table: what the daemon perturbs through a working view.
+    pub fn encoded_view<'a>(&self, payload: &'a [u8]) -> WireResult<EncodedView<'a>> {
+        let data = self.valid_bytes(payload)?;
+        Ok(EncodedView::new(
+            data,
+            self.width,
+            self.height,
+            self.step as usize,
+            self.image_encoding()?,
+            self.is_bigendian != 0,
         )?)
     }
 
@@ -742,9 +755,22 @@ mod tests {
             "{e}"
         );
         h.version = WIRE_VERSION;
-        h.set_encoding("yuv422").unwrap();
+        h.set_encoding("nv21").unwrap();
         let e = h.validate(48).unwrap_err().to_string();
-        assert!(e.contains("yuv422"), "{e}");
+        assert!(e.contains("`nv21`"), "{e}");
+        // Encodings of the table validate with their own rules: a Bayer frame's width is even.
+        h.set_encoding("bayer_rggb8").unwrap();
+        assert!(h.validate(48).is_ok());
+        h.width = 3;
+        let e = h.validate(48).unwrap_err().to_string();
+        assert!(
+            e.contains("bayer_rggb8") && e.contains("width 3 is odd"),
+            "{e}"
+        );
+        h.set_encoding("mono16").unwrap();
+        h.step = 5;
+        let e = h.validate(48).unwrap_err().to_string();
+        assert!(e.contains("step 5 is smaller than width 3 x 2"), "{e}");
 
         let layout = PointLayout::new(
             vec![PointField::new("intensity", 0, Datatype::Float32)],

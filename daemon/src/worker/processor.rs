@@ -6,6 +6,7 @@ use super::{Item, TICK, should_log};
 use crate::perturbation::Active;
 use crate::stats::Counters;
 use crossbeam::channel::{Receiver, RecvTimeoutError};
+use perturb_core::encoding::Scratch;
 use perturb_core::registry::Modality;
 use perturb_wire::{Frame, FramePublisher, LayoutCache, WireError, WireModality, monotonic_ns};
 use std::sync::atomic::Ordering;
@@ -20,6 +21,9 @@ pub(super) fn process_loop(
     let name = rt.config.name.as_str();
     let mut cache = LayoutCache::default();
     let mut step = rt.step();
+    // The conversion buffers of frames in encodings that are not working layouts (Bayer, YUV,
+    // 16-bit), reused from frame to frame.
+    let mut scratch = Scratch::new();
     loop {
         let item = match rx.recv_timeout(TICK) {
             Ok(i) => i,
@@ -46,26 +50,52 @@ pub(super) fn process_loop(
             }
             active = change;
         }
-        process_one(rt, &mut publisher, item, &mut active, step, &mut cache);
+        process_one(
+            rt,
+            &mut publisher,
+            item,
+            &mut active,
+            step,
+            &mut cache,
+            &mut scratch,
+        );
     }
     debug!(stream = name, "processor stopped");
 }
 
 /// Checks a received frame is one the stream can process: header and payload agree, the
-/// modality is the stream's, the image encoding is supported or the point layout is readable.
+/// modality is the stream's, the image's encoding is in the encoding table and its size, step
+/// and data fit it, or the point layout is readable.
 pub(super) fn check(
     modality: Modality,
     frame: &Frame,
     layouts: &mut LayoutCache,
 ) -> Result<(), WireError> {
     match modality {
-        Modality::Camera => frame.image().map(|_| ()),
+        Modality::Camera => match frame.validate()? {
+            WireModality::Camera => frame.header().encoded_view(frame.payload()).map(|_| ()),
+            WireModality::Lidar => Err(WireError::invalid("expected an image, got a point cloud")),
+        },
         Modality::Lidar => frame.cloud_cached(layouts).map(|_| ()),
     }
 }
 
+/// Counts an invalid frame and logs it (the first ten, then every 100th); an encoding the
+/// table does not have is logged once per stream and encoding instead.
 pub(super) fn invalid(rt: &StreamRuntime, seq: u64, e: &WireError) {
     let n = rt.stats.counters.invalid.fetch_add(1, Ordering::Relaxed) + 1;
+    if let WireError::Core(perturb_core::Error::UnsupportedEncoding { encoding }) = e {
+        let mut seen = rt.unsupported.lock().unwrap_or_else(|p| p.into_inner());
+        if seen.insert(encoding.clone()) {
+            warn!(
+                stream = rt.config.name.as_str(),
+                seq,
+                invalid = n,
+                "{e}; frames in `{encoding}` are counted as invalid and skipped, the stream carries on (logged once)"
+            );
+        }
+        return;
+    }
     if should_log(n) {
         warn!(
             stream = rt.config.name.as_str(),
@@ -98,6 +128,7 @@ fn process_one(
     active: &mut Option<Active>,
     step: u16,
     cache: &mut LayoutCache,
+    scratch: &mut Scratch,
 ) {
     let Item { frame, t_rx } = item;
     let h = *frame.header();
@@ -123,7 +154,7 @@ fn process_one(
     let mut held = None;
     let active = if killed { &mut held } else { active };
     let loan = match want {
-        WireModality::Camera => camera(rt, publisher, &frame, &h, active),
+        WireModality::Camera => camera(rt, publisher, &frame, &h, active, scratch),
         WireModality::Lidar => lidar(rt, publisher, &frame, &h, active, cache),
     };
     let mut loan = match loan {
@@ -203,23 +234,28 @@ fn process_one(
 
 type Loan = perturb_wire::FrameLoan;
 
-/// Writes the output image into a loan: perturbed, or copied when off (or when the perturbation
-/// fails). `Ok(None)`: the frame was invalid and counted.
+/// Writes the output image into a loan: perturbed (through the working view for encodings that
+/// are not working layouts, written back in the input's encoding, size and step), or copied
+/// when off (or when the perturbation fails). `Ok(None)`: the frame was invalid and counted.
 fn camera(
     rt: &StreamRuntime,
     publisher: &FramePublisher,
     frame: &Frame,
     h: &perturb_wire::FrameHeader,
     active: &mut Option<Active>,
+    scratch: &mut Scratch,
 ) -> Result<Option<Loan>, WireError> {
-    let input = match frame.image() {
+    let input = match h
+        .encoded_view(frame.payload())
+        .and_then(|v| rt.with_bit_depth(v))
+    {
         Ok(v) => v,
         Err(e) => {
             invalid(rt, h.seq, &e);
             return Ok(None);
         }
     };
-    let g = input.geometry();
+    let g = input.working_geometry();
     {
         let mut last = rt.geometry.lock().unwrap_or_else(|p| p.into_inner());
         if *last != Some(g) {
@@ -234,20 +270,11 @@ fn camera(
     match active {
         Some(Active::Camera(p)) => {
             let result = {
-                let mut out = h.image_view_mut(loan.payload_mut())?;
-                rt.on_workers(|| p.apply(&input, &mut out, h.seq))
+                let out = &mut loan.payload_mut()[..len];
+                rt.on_workers(|| p.apply_encoded(&input, out, h.seq, scratch))
             };
             match result {
                 Ok(()) => {
-                    let out = loan.payload_mut();
-                    // Row padding is not image data: pass it through.
-                    let (step, row) = (h.step as usize, g.row_bytes());
-                    if step > row {
-                        for y in 0..(h.height as usize).saturating_sub(1) {
-                            let r = y * step + row..(y + 1) * step;
-                            out[r.clone()].copy_from_slice(&data[r]);
-                        }
-                    }
                     let spec = p.spec();
                     loan.header_mut().set_applied(Some(&spec));
                 }

@@ -10,6 +10,7 @@ use perturb_core::image::ImageGeometry;
 use perturb_core::perturber::Spec;
 use perturb_wire::control::LostByCause;
 use perturb_wire::control::StreamReport;
+use std::collections::HashSet;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -38,6 +39,9 @@ pub struct StreamRuntime {
     control: Mutex<ControlState>,
     has_pending: AtomicBool,
     pub(super) geometry: Mutex<Option<ImageGeometry>>,
+    /// Image encodings this stream received that the encoding table does not have, each logged
+    /// once (the frames are counted as invalid).
+    pub(super) unsupported: Mutex<HashSet<String>>,
     /// The stream's own worker threads (`threads` in its configuration); `None`: the global pool.
     pool: Option<rayon::ThreadPool>,
     /// The daemon's kill switch (shared by every stream).
@@ -81,6 +85,7 @@ impl StreamRuntime {
             }),
             has_pending: AtomicBool::new(false),
             geometry: Mutex::new(None),
+            unsupported: Mutex::new(HashSet::new()),
             pool,
             kill: Arc::default(),
         })
@@ -98,6 +103,17 @@ impl StreamRuntime {
         match &self.pool {
             Some(pool) => pool.install(work),
             None => work(),
+        }
+    }
+
+    /// `view` with the stream's `bit_depth` for 16-bit encodings (8-bit frames as they are).
+    pub(super) fn with_bit_depth<'a>(
+        &self,
+        view: perturb_core::encoding::EncodedView<'a>,
+    ) -> Result<perturb_core::encoding::EncodedView<'a>, perturb_wire::WireError> {
+        match self.config.bit_depth {
+            Some(bits) if view.encoding.bits == 16 => Ok(view.with_bit_depth(bits)?),
+            _ => Ok(view),
         }
     }
 

@@ -16,8 +16,9 @@
 //! ```
 
 use crate::cloud::{CloudView, Datatype, PointField, PointLayout};
+use crate::encoding::EncodedView;
 use crate::error::{Error, Result};
-use crate::image::{ImageView, PixelFormat};
+use crate::image::ImageView;
 use std::sync::Arc;
 
 /// `std_msgs/Header`.
@@ -260,26 +261,17 @@ impl<'a> ImageMsg<'a> {
         w.buf
     }
 
-    /// A view of the pixels, checking that the encoding is supported and that height, step and the
-    /// data length agree.
-    pub fn view(&self) -> Result<ImageView<'a>> {
-        let format = PixelFormat::from_ros_encoding(self.encoding)?;
-        let need = self.step as usize * self.height as usize;
-        if self.data.len() < need {
-            return Err(Error::image(format!(
-                "header says {}x{} with step {} ({need} bytes) but the message carries {} bytes",
-                self.width,
-                self.height,
-                self.step,
-                self.data.len()
-            )));
-        }
-        ImageView::new(
+    /// A view of the pixels in their encoding (any row of [`crate::encoding::ENCODINGS`]),
+    /// checking that the encoding is supported and that width, height, step and the data length
+    /// agree (`step * height` bytes); an error names the field and its value.
+    pub fn view(&self) -> Result<EncodedView<'a>> {
+        EncodedView::from_ros(
             self.data,
             self.width,
             self.height,
             self.step as usize,
-            format,
+            self.encoding,
+            self.is_bigendian,
         )
     }
 
@@ -519,10 +511,18 @@ mod tests {
         let err = msg.view().unwrap_err();
         assert!(err.to_string().contains("48 bytes"), "{err}");
         let msg = ImageMsg {
-            encoding: "bayer_rggb8",
+            encoding: "nv21",
             data: &[0; 48],
             ..msg
         };
-        assert!(msg.view().unwrap_err().to_string().contains("bayer_rggb8"));
+        assert!(msg.view().unwrap_err().to_string().contains("`nv21`"));
+        let msg = ImageMsg {
+            encoding: "bayer_rggb8",
+            width: 3,
+            step: 3,
+            ..msg
+        };
+        let err = msg.view().unwrap_err().to_string();
+        assert!(err.contains("width 3 is odd"), "{err}");
     }
 }

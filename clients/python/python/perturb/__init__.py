@@ -14,6 +14,10 @@ True
 - :class:`CameraPerturber` perturbs HxWx3 (rgb8), HxWx4 (rgba8) or HxW (mono8) uint8 arrays.
 - :class:`LidarPerturber` perturbs (N, k) float32 point arrays (x, y, z, intensity, extras).
 - :func:`detect` runs the LiDAR clustering detector (``perturb detect``).
+- :func:`encodings` lists the ``sensor_msgs/Image`` encodings; :func:`apply_encoded` perturbs a
+  frame's bytes in any of them (Bayer, YUV 4:2:2, 16-bit) and returns them in that encoding.
+- :func:`report` writes the study report (``perturb report``): the paper's tables and figures
+  in one self-contained HTML page from a folder of the study tools' outputs.
 - :mod:`perturb.ray` perturbs Ray Datasets and runs ``perturb batch`` on a Ray cluster.
 - :mod:`perturb.adapters` wraps perturbers as torchvision / albumentations transforms and a
   PyTorch ``Dataset``.
@@ -28,8 +32,11 @@ from ._perturb import (
     LidarPerturber,
     PerturbError,
     __version__,
+    apply_encoded,
     catalogue,
     detect,
+    report,
+    encodings,
 )
 
 __all__ = [
@@ -37,8 +44,11 @@ __all__ = [
     "LidarPerturber",
     "PerturbError",
     "__version__",
+    "apply_encoded",
     "catalogue",
     "detect",
+    "report",
+    "encodings",
     "perturber",
 ]
 

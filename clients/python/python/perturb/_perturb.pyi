@@ -83,6 +83,36 @@ def detect(
 ) -> List[Detection]:
     """The clustering detector's boxes (``perturb detect --json``)."""
 
+class Encoding(TypedDict):
+    name: str
+    aliases: List[str]
+    layout: str
+    bits: int
+    bytes_per_pixel: int
+    tile: List[int]
+    working: str
+    opencv: Optional[str]
+    summary: str
+
+def encodings() -> List[Encoding]:
+    """The ``sensor_msgs/Image`` encodings the package reads and writes (one table for all)."""
+
+def apply_encoded(
+    data: bytes,
+    encoding: str,
+    width: int,
+    height: int,
+    step: int,
+    id: str,
+    severity: int,
+    seed: int = 0,
+    seq: int = 0,
+    *,
+    is_bigendian: int = 0,
+    bit_depth: Optional[int] = None,
+) -> bytes:
+    """The perturbed bytes of a frame in ``encoding`` (same length, encoding, step, byte order)."""
+
 def input_is_copied(array: npt.ArrayLike, *, cloud: bool = False) -> bool:
     """True if the package copies ``array`` before reading it (its strides are not packed)."""
 
@@ -100,6 +130,19 @@ def plan_batch(
     shard: Optional[str] = None,
 ) -> Dict[str, Any]:
     """Plans a folder batch as ``perturb batch`` and writes ``OUT/batch.json``."""
+
+def report(
+    study_dir: _Path,
+    output: _Path = "report.html",
+    *,
+    title: Optional[str] = None,
+    resamples: int = 10000,
+    seed: int = 0,
+) -> Dict[str, Any]:
+    """Writes the study report (``perturb report``): one self-contained HTML page with the
+    paper's tables and figures from the outputs in ``study_dir``, and ``<stem>.json`` and
+    ``<stem>-<table>.csv`` beside it. Returns ``html``, ``json``, ``csv``, ``present``,
+    ``missing`` (section -> why its input is missing) and ``used``."""
 
 def mark_done(dir: _Path, files: int) -> None:
     """Writes a set's ``.done`` marker."""

@@ -2,7 +2,8 @@
 //! budget, the offline metrics per severity (one panel per family, a line per perturbation),
 //! transfer scatter plots, and the small trend and completion bars of the paper's tables.
 
-use super::{FAIL_RED, OK_GREEN, UNJUDGED_GREY, nice_length, plot_err, series_colour};
+use super::labels::{LabelPlacer, Rect, text_width};
+use super::{FAIL_RED, OK_GREEN, UNJUDGED_GREY, plot_err, series_colour};
 use crate::analyze::Outcome;
 use plotters::prelude::*;
 
@@ -25,7 +26,7 @@ pub struct LatencyBar {
 pub fn latency_bars(title: &str, rows: &[LatencyBar], budget_ms: f64) -> crate::Result<String> {
     let e = || plot_err("the latency chart");
     let n = rows.len().max(1);
-    let (w, h) = (760u32, 70 + 18 * n as u32);
+    let (w, h) = (760u32, (80 + 20 * n as u32).max(150));
     let lo = rows
         .iter()
         .map(|r| r.avg_ms.min(r.max_ms))
@@ -61,7 +62,8 @@ pub fn latency_bars(title: &str, rows: &[LatencyBar], budget_ms: f64) -> crate::
             .y_label_formatter(&ylab)
             .x_label_formatter(&|v| format!("{v}"))
             .disable_y_mesh()
-            .label_style(("sans-serif", 11))
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
             .draw()
             .map_err(e())?;
         for (i, r) in rows.iter().enumerate() {
@@ -90,39 +92,6 @@ pub fn latency_bars(title: &str, rows: &[LatencyBar], budget_ms: f64) -> crate::
                 vec![(budget_ms, 0.0), (budget_ms, n as f64)],
                 FAIL_RED.stroke_width(2),
             )))
-            .map_err(e())?
-            .label(format!("budget {budget_ms} ms"))
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], FAIL_RED.stroke_width(2)));
-        chart
-            .draw_series(std::iter::once(Rectangle::new(
-                [(lo, -1.0), (lo, -1.0)],
-                RGBColor(70, 120, 180).filled(),
-            )))
-            .map_err(e())?
-            .label("average over severities")
-            .legend(|(x, y)| {
-                Rectangle::new(
-                    [(x, y - 5), (x + 18, y + 5)],
-                    RGBColor(70, 120, 180).filled(),
-                )
-            });
-        chart
-            .draw_series(std::iter::once(PathElement::new(
-                vec![(lo, -1.0), (lo, -1.0)],
-                INK.stroke_width(2),
-            )))
-            .map_err(e())?
-            .label("maximum")
-            .legend(|(x, y)| {
-                PathElement::new(vec![(x + 9, y - 6), (x + 9, y + 6)], INK.stroke_width(2))
-            });
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.9))
-            .border_style(INK)
-            .label_font(("sans-serif", 12))
-            .draw()
             .map_err(e())?;
         root.present().map_err(e())?;
     }
@@ -170,10 +139,11 @@ pub fn severity_curves(metric: &str, panels: &[(String, Vec<Curve>)]) -> crate::
             let pad = ((hi - lo) * 0.08).max(1e-6);
             let (lo, hi) = (lo.min(0.0).min(lo - pad), hi + pad);
             let mut chart = ChartBuilder::on(area)
-                .caption(family, ("sans-serif", 14))
+                .caption(family, ("sans-serif", 17))
                 .margin(6)
-                .x_label_area_size(30)
-                .y_label_area_size(52)
+                .margin_right(40)
+                .x_label_area_size(34)
+                .y_label_area_size(58)
                 .build_cartesian_2d(0.7f64..max_sev as f64 + 0.3, lo..hi)
                 .map_err(e())?;
             chart
@@ -182,32 +152,49 @@ pub fn severity_curves(metric: &str, panels: &[(String, Vec<Curve>)]) -> crate::
                 .y_desc(metric)
                 .x_labels(max_sev as usize)
                 .x_label_formatter(&|v| format!("{v:.0}"))
-                .label_style(("sans-serif", 11))
-                .light_line_style(RGBColor(240, 240, 240))
+                .label_style(("sans-serif", 13))
+                .axis_desc_style(("sans-serif", 14))
+                .max_light_lines(1)
+                .light_line_style(RGBColor(244, 244, 244))
                 .draw()
                 .map_err(e())?;
+            let mut ends = Vec::new();
             for (k, c) in curves.iter().enumerate() {
                 let col = series_colour(k);
                 let pts: Vec<(f64, f64)> = c.points.iter().map(|p| (p.0 as f64, p.1)).collect();
                 chart
                     .draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
-                    .map_err(e())?
-                    .label(c.id.clone())
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 14, y)], col.stroke_width(2))
-                    });
+                    .map_err(e())?;
                 chart
                     .draw_series(pts.iter().map(|p| Circle::new(*p, 3, col.filled())))
                     .map_err(e())?;
+                if let Some(last) = pts.last() {
+                    ends.push((chart.backend_coord(last), c.id.clone(), col));
+                }
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
-                .background_style(WHITE.mix(0.85))
-                .border_style(RGBColor(180, 180, 180))
-                .label_font(("sans-serif", 10))
-                .draw()
-                .map_err(e())?;
+            // Each line labelled at its last point, the labels kept apart.
+            let (ox, oy) = area.get_base_pixel();
+            let (aw, ah) = area.dim_in_pixel();
+            let mut placer = LabelPlacer::new(Rect {
+                x: ox as f64,
+                y: oy as f64 + 18.0,
+                w: aw as f64,
+                h: ah as f64 - 48.0,
+            });
+            for ((x, y), _, _) in &ends {
+                placer.block(Rect::centred(*x as f64, *y as f64, 8.0, 8.0));
+            }
+            for ((x, y), id, col) in ends {
+                let w = text_width(&id, 12.0) + 4.0;
+                if let Some(r) = placer.place(x as f64, y as f64, w, 15.0, 4.0) {
+                    area.draw(&Text::new(
+                        id,
+                        ((r.x - ox as f64) as i32 + 2, (r.y - oy as f64) as i32 + 1),
+                        ("sans-serif", 15).into_font().color(&col),
+                    ))
+                    .map_err(e())?;
+                }
+            }
         }
         root.present().map_err(e())?;
     }
@@ -256,18 +243,20 @@ pub fn transfer_scatter(
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(e())?;
         let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 13))
+            .caption(title, ("sans-serif", 16))
             .margin(8)
-            .x_label_area_size(36)
-            .y_label_area_size(52)
+            .x_label_area_size(40)
+            .y_label_area_size(58)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(e())?;
         chart
             .configure_mesh()
             .x_desc(x_name)
             .y_desc(y_name)
-            .label_style(("sans-serif", 10))
-            .light_line_style(RGBColor(240, 240, 240))
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
+            .max_light_lines(1)
+            .light_line_style(RGBColor(244, 244, 244))
             .draw()
             .map_err(e())?;
         for p in points {
@@ -370,9 +359,4 @@ pub fn completion_bars(runs: &[(Option<f64>, Outcome)]) -> crate::Result<String>
         root.present().map_err(e())?;
     }
     Ok(svg)
-}
-
-/// A step for an axis over `span`: a round value giving about `ticks` ticks.
-pub fn axis_step(span: f64, ticks: usize) -> f64 {
-    nice_length(span / ticks.max(1) as f64)
 }
