@@ -3,8 +3,8 @@
 //! "<sink topic>"` publishes each of them, unchanged (same header, same bytes, same type), right
 //! after the image with the same stamp goes out; so a consumer that pairs image and camera_info
 //! by exact stamp (image_transport's CameraSubscriber, image_proc) finds both under the names it
-//! subscribes to. A camera_info whose image never comes (the image was lost) goes out once eight
-//! newer ones wait. Both topics are on the same transport (ROS 1, or ROS 2); the sink is
+//! subscribes to. A camera_info that comes after its image goes out at once; one whose image never
+//! comes (the image was lost) goes out half a second later, or once eight newer ones wait. Both topics are on the same transport (ROS 1, or ROS 2); the sink is
 //! advertised as `sensor_msgs/CameraInfo` when the bridge starts.
 
 use crate::msgs::{CAMERA_INFO, SmallEndpoint, SmallWriter, Wire};
@@ -23,6 +23,8 @@ pub struct Calibration {
     pub data: Vec<u8>,
     /// Its serialization.
     pub wire: Wire,
+    /// When the ingress received it.
+    pub arrived: std::time::Instant,
 }
 
 /// The header stamp of a message that starts with a `std_msgs/Header` (ROS 1: `seq`, then
@@ -53,6 +55,8 @@ pub struct CameraInfoLink {
 
 /// How many camera_info messages wait for their image before the oldest goes out anyway.
 const WAIT: usize = 8;
+/// How long a camera_info waits for its image before it goes out anyway.
+const WAIT_TIME: std::time::Duration = std::time::Duration::from_millis(500);
 
 impl CameraInfoLink {
     /// The ingress side: a camera_info arrived.
@@ -63,13 +67,16 @@ impl CameraInfoLink {
             .push_back(c);
     }
 
-    /// The egress side: the camera_info messages to publish after the image stamped `stamp`
-    /// (those stamped at or before it, and the oldest beyond [`WAIT`]).
-    pub fn take_for(&self, stamp: (i32, u32)) -> Vec<Calibration> {
+    /// The egress side: the camera_info messages to publish now that the last image out was
+    /// stamped `stamp` (those stamped at or before it, the oldest beyond [`WAIT`], those
+    /// waiting longer than [`WAIT_TIME`]).
+    pub fn take_for(&self, stamp: (i32, u32), now: std::time::Instant) -> Vec<Calibration> {
         let mut w = self.waiting.lock().unwrap_or_else(|p| p.into_inner());
         let mut out = Vec::new();
         while let Some(c) = w.front() {
-            let due = (c.stamp.0, c.stamp.1) <= stamp || w.len() > WAIT;
+            let due = (c.stamp.0, c.stamp.1) <= stamp
+                || w.len() > WAIT
+                || now.saturating_duration_since(c.arrived) >= WAIT_TIME;
             if !due {
                 break;
             }
@@ -89,6 +96,8 @@ pub struct CameraInfoSink {
     pub published: u64,
     /// Messages that could not be published.
     pub failed: u64,
+    /// The stamp of the last image out.
+    last_image: (i32, u32),
 }
 
 impl CameraInfoSink {
@@ -100,12 +109,19 @@ impl CameraInfoSink {
             writer,
             published: 0,
             failed: 0,
+            last_image: (i32::MIN, 0),
         })
     }
 
-    /// Publishes what `link` holds for the image stamped `stamp`.
+    /// Publishes what `link` holds for the image stamped `stamp`, which just went out.
     pub fn after_image(&mut self, link: &CameraInfoLink, stamp: (i32, u32)) {
-        for c in link.take_for(stamp) {
+        self.last_image = self.last_image.max(stamp);
+        self.poll(link);
+    }
+
+    /// Publishes what is due: a camera_info that came after its image, or waited too long.
+    pub fn poll(&mut self, link: &CameraInfoLink) {
+        for c in link.take_for(self.last_image, std::time::Instant::now()) {
             let r = if self.writer.wire() == c.wire {
                 self.writer.write(&c.data)
             } else {
@@ -140,6 +156,7 @@ mod tests {
             stamp: stamp_of(&data, Wire::Cdr).unwrap(),
             data,
             wire: Wire::Cdr,
+            arrived: std::time::Instant::now(),
         }
     }
 
@@ -150,13 +167,16 @@ mod tests {
         for s in [1, 2, 3] {
             l.push(cal(s));
         }
-        let due = l.take_for((2, 7));
+        let now = std::time::Instant::now();
+        let due = l.take_for((2, 7), now);
         assert_eq!(due.iter().map(|c| c.stamp.0).collect::<Vec<_>>(), [1, 2]);
         for s in 4..14 {
             l.push(cal(s));
         }
-        let due = l.take_for((0, 0));
+        let due = l.take_for((0, 0), now);
         assert_eq!(due.len(), 3, "the oldest beyond 8 go out anyway");
+        let due = l.take_for((0, 0), std::time::Instant::now() + WAIT_TIME);
+        assert_eq!(due.len(), 8, "and every one that waited half a second");
         let mut ros1 = vec![0u8; 4];
         ros1.extend_from_slice(&9u32.to_le_bytes());
         ros1.extend_from_slice(&3u32.to_le_bytes());

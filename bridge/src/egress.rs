@@ -148,6 +148,13 @@ impl Out {
         }
     }
 
+    /// Publishes the camera_info messages that are due (those that came after their image).
+    fn poll_camera_info(&mut self) {
+        if let Some((link, sink)) = &mut self.camera_info {
+            sink.poll(link);
+        }
+    }
+
     /// Frames the writer dropped since last asked (slow ROS 1 subscribers): counted, reported.
     fn egress_drops(&mut self, seen: &mut u64, seq: u64) {
         let now = self.writer.dropped();
@@ -270,6 +277,7 @@ fn run_plain(
             log_bad(&out.name, out.rep.failed, &e);
         }
         out.egress_drops(&mut seen_drops, last_seq);
+        out.poll_camera_info();
         ctl.watch_publishers(sub.as_ref());
     }
     Ok(())
@@ -394,6 +402,7 @@ fn run_guarded(
                 }
             }
             out.egress_drops(&mut seen_drops, last_seq);
+            out.poll_camera_info();
             // A perturbd killed with kill -9 stays listed as the perturbed side's publisher
             // until its ports are swept: look for dead processes while the side is silent.
             if daemon_up()

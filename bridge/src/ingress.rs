@@ -61,6 +61,7 @@ fn relay_camera_info(
                     stamp,
                     data: m.data.to_vec(),
                     wire: m.wire,
+                    arrived: std::time::Instant::now(),
                 });
             }
             None => {
