@@ -294,6 +294,22 @@ fn bayer_yuv_and_big_endian_mono16_frames_come_out_of_perturbd_in_their_own_enco
         wr.write(ch, 1 + seq, 1 + seq, &m.encode()).unwrap();
     }
     wr.finish().unwrap();
+    // perturb info names each image's encoding (the last one read on the topic: mono16).
+    let o = Command::new(exe("perturb"))
+        .arg("info")
+        .arg(&bag)
+        .output()
+        .unwrap();
+    let info = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "perturb info: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        info.contains("mono16: grey, 16 bits, big-endian") && info.contains("mono8 view"),
+        "{info}"
+    );
     let applied = ns.dir.join("out_bag");
     let o = Command::new(exe("perturb"))
         .args(["apply", "--id", ID.0, "--severity", &ID.1.to_string()])
@@ -355,4 +371,44 @@ fn bayer_yuv_and_big_endian_mono16_frames_come_out_of_perturbd_in_their_own_enco
             );
         }
     }
+}
+
+#[test]
+fn perturb_bench_times_the_conversion_pair_beside_the_perturbation() {
+    let Some(png) = shared_data("kitti/image_2/000000.png") else {
+        return;
+    };
+    let o = Command::new(exe("perturb"))
+        .args(["bench", "--modality", "camera", "--encoding", "bayer_rggb8"])
+        .args([
+            "--encoding",
+            "yuv422",
+            "--id",
+            "C-C4",
+            "--width",
+            "64",
+            "--height",
+            "48",
+        ])
+        .args(["--frames", "2", "--json", "--input"])
+        .arg(&png)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows: Vec<serde_json::Value> = serde_json::from_slice(&o.stdout).unwrap();
+    // Five severities per encoding, each with the pair's medians and the whole frame's.
+    assert_eq!(rows.len(), 10, "{rows:?}");
+    for r in &rows {
+        for k in [
+            "pair_ms",
+            "to_working_ms",
+            "write_back_ms",
+            "perturbation_ms",
+            "median_ms",
+        ] {
+            assert!(r[k].as_f64().is_some_and(|v| v >= 0.0), "{k} in {r}");
+        }
+    }
+    assert_eq!(rows[0]["encoding"], "bayer_rggb8");
+    assert_eq!(rows[9]["encoding"], "yuv422");
 }
