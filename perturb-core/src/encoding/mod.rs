@@ -575,7 +575,7 @@ fn copy_padding(input: &EncodedView<'_>, out: &mut [u8]) {
 
 /// The buffers a frame in a non-working encoding is converted through: reused from frame to
 /// frame (per stream in the daemon), grown only when a larger frame arrives.
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct Scratch {
     /// A 16-bit frame's samples mapped to 8 bits, same layout, tight rows.
     reduced: Vec<u8>,
@@ -585,6 +585,18 @@ pub struct Scratch {
     work_in: Option<Image>,
     /// The working view the perturbation writes.
     work_out: Option<Image>,
+}
+
+impl std::fmt::Debug for Scratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let g = |i: &Option<Image>| i.as_ref().map(|i| i.geometry().to_string());
+        f.debug_struct("Scratch")
+            .field("reduced_bytes", &self.reduced.len())
+            .field("reduced_out_bytes", &self.reduced_out.len())
+            .field("work_in", &g(&self.work_in))
+            .field("work_out", &g(&self.work_out))
+            .finish()
+    }
 }
 
 /// An image of geometry `g` in `slot`, reused when it has that geometry.
@@ -688,6 +700,11 @@ impl Scratch {
             } else {
                 let e8 = input.encoding.eight_bit();
                 let row = e8.row_bytes(input.width);
+                if reduced.len() != row * input.height as usize {
+                    return Err(Error::image(
+                        "from_working without the frame's to_working".to_string(),
+                    ));
+                }
                 let v8 = EncodedView {
                     data: reduced,
                     width: input.width,

@@ -600,3 +600,20 @@ fn demosaicking_matches_a_plain_per_pixel_reference_on_every_pattern() {
         }
     });
 }
+
+#[test]
+fn a_write_back_without_its_conversion_is_an_error() {
+    for name in ["mono16", "yuv422", "bayer_rggb16"] {
+        let e = Encoding::find(name).unwrap();
+        let data = vec![0u8; e.row_bytes(4) * 2];
+        let input = EncodedView::new(&data, 4, 2, e.row_bytes(4), e, false).unwrap();
+        let working = Image::with_geometry(input.working_geometry());
+        let err = Scratch::new()
+            .from_working(&input, &working.view(), &mut vec![0; data.len()])
+            .unwrap_err();
+        assert!(
+            err.to_string().contains("without the frame's to_working"),
+            "{name}: {err}"
+        );
+    }
+}
