@@ -63,17 +63,24 @@ impl Route {
         *self.cum.last().expect("two points")
     }
 
+    /// (arc length, signed lateral offset, distance) of `p` against segment `i`. Before the
+    /// route's start and beyond its end the offset is the perpendicular distance to the first
+    /// or last segment's line (a vehicle 20 m before the start on the route's line is on it,
+    /// not 20 m off it); the distance, which picks the nearest segment, is the true one.
     fn project_segment(&self, i: usize, p: [f64; 2]) -> (f64, f64, f64) {
         let (a, b) = (self.points[i], self.points[i + 1]);
         let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
         let len2 = dx * dx + dy * dy;
-        let t = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0);
+        let raw = ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2;
+        let t = raw.clamp(0.0, 1.0);
         let (cx, cy) = (a[0] + t * dx, a[1] + t * dy);
         let dist = (p[0] - cx).hypot(p[1] - cy);
         let len = len2.sqrt();
         let cross = (dx * (p[1] - a[1]) - dy * (p[0] - a[0])) / len;
         let side = if cross >= 0.0 { 1.0 } else { -1.0 };
-        (self.cum[i] + t * len, dist * side, dist)
+        let outside = (i == 0 && raw < 0.0) || (i + 2 == self.points.len() && raw > 1.0);
+        let offset = if outside { cross } else { dist * side };
+        (self.cum[i] + t * len, offset, dist)
     }
 
     fn best_in(&self, range: std::ops::Range<usize>, p: [f64; 2]) -> Projection {
@@ -323,6 +330,19 @@ mod tests {
         assert_eq!(r.curvature_at(3.0, 2.0), 0.0);
         assert_eq!(r.point_at(12.5), [10.0, 2.5]);
         assert!(Route::new(vec![[1.0, 1.0], [1.0, 1.0]]).is_err());
+    }
+
+    #[test]
+    fn before_the_start_and_past_the_end_the_offset_is_to_the_end_segments_line() {
+        let r = Route::new(vec![[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]]).unwrap();
+        let p = r.project([-20.0, 0.0]);
+        assert_eq!(
+            (p.s, p.offset),
+            (0.0, 0.0),
+            "on the route's line, 20 m before it"
+        );
+        assert_eq!(r.project([-20.0, 1.5]).offset, 1.5);
+        assert_eq!(r.project([35.0, -2.0]).offset, -2.0);
     }
 
     #[test]

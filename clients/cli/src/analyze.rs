@@ -7,7 +7,6 @@ use perturb_study::analyze::{
     Aggregate, AnalyzeConfig, CteTo, JitterUnit, ObjectsConfig, ObjectsFrame, TopicField,
     render_conditions, render_perturbations, render_runs, render_segments, render_summary,
 };
-use perturb_study::route::Route;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `perturb analyze`.
@@ -379,7 +378,11 @@ impl RunArgs {
             );
         }
         let mut cfg = AnalyzeConfig {
-            route: self.route.as_deref().map(Route::from_csv).transpose()?,
+            route: self
+                .route
+                .as_deref()
+                .map(perturb_study::route::load)
+                .transpose()?,
             cte_to: match self.cte_to {
                 CteArg::Region => CteTo::Region,
                 CteArg::Route => CteTo::Route,

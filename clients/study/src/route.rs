@@ -1,251 +1,26 @@
 //! The reference route: a polyline in the pose frame, with arc length, signed lateral offset and
-//! curvature.
+//! curvature. The geometry is `perturb_core::route` (campaigns project the vehicle on a route
+//! with it too); this module reads routes from files with the study's errors.
 
 use crate::error::{Result, StudyError};
+pub use perturb_core::route::{Projection, Route};
 use std::path::Path;
 
-/// A reference route.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Route {
-    /// The vertices, consecutive duplicates removed.
-    pub points: Vec<[f64; 2]>,
-    /// Arc length at each vertex, metres (`cum[0] == 0`).
-    pub cum: Vec<f64>,
-}
-
-/// Where a position lies relative to the route.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Projection {
-    /// Arc length of the closest point, metres.
-    pub s: f64,
-    /// Signed lateral distance, metres: positive to the left of the direction of travel.
-    pub offset: f64,
-    /// Index of the segment of the closest point.
-    pub segment: usize,
-}
-
-/// How far behind and ahead of the previous projection a tracked projection searches, metres.
-const TRACK_BACK: f64 = 15.0;
-const TRACK_AHEAD: f64 = 40.0;
-
-impl Route {
-    /// A route through `points`; at least two distinct points.
-    pub fn new(points: Vec<[f64; 2]>) -> std::result::Result<Route, String> {
-        let mut pts: Vec<[f64; 2]> = Vec::with_capacity(points.len());
-        for p in points {
-            if !(p[0].is_finite() && p[1].is_finite()) {
-                return Err(format!("point ({}, {}) is not finite", p[0], p[1]));
-            }
-            if pts.last() != Some(&p) {
-                pts.push(p);
-            }
-        }
-        if pts.len() < 2 {
-            return Err(format!(
-                "a route needs at least 2 distinct points, found {}",
-                pts.len()
-            ));
-        }
-        let mut cum = vec![0.0];
-        for w in pts.windows(2) {
-            let d = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
-            cum.push(cum.last().expect("one") + d);
-        }
-        Ok(Route { points: pts, cum })
-    }
-
-    /// Reads a route from a CSV of points (see [`read_xy_csv`]).
-    pub fn from_csv(path: &Path) -> Result<Route> {
-        let points = read_xy_csv(path)?;
-        Route::new(points).map_err(|reason| StudyError::Route {
-            path: path.to_path_buf(),
-            reason,
-        })
-    }
-
-    /// Total length, metres.
-    pub fn length(&self) -> f64 {
-        *self.cum.last().expect("two points")
-    }
-
-    /// (arc length, signed lateral offset, distance) of `p` against segment `i`. Before the
-    /// route's start and beyond its end the offset is the perpendicular distance to the first
-    /// or last segment's line (a vehicle 20 m before the start on the route's line is on it,
-    /// not 20 m off it); the distance, which picks the nearest segment, is the true one.
-    fn project_segment(&self, i: usize, p: [f64; 2]) -> (f64, f64, f64) {
-        let (a, b) = (self.points[i], self.points[i + 1]);
-        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-        let len2 = dx * dx + dy * dy;
-        let raw = ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2;
-        let t = raw.clamp(0.0, 1.0);
-        let (cx, cy) = (a[0] + t * dx, a[1] + t * dy);
-        let dist = (p[0] - cx).hypot(p[1] - cy);
-        let len = len2.sqrt();
-        let cross = (dx * (p[1] - a[1]) - dy * (p[0] - a[0])) / len;
-        let side = if cross >= 0.0 { 1.0 } else { -1.0 };
-        let outside = (i == 0 && raw < 0.0) || (i + 2 == self.points.len() && raw > 1.0);
-        let offset = if outside { cross } else { dist * side };
-        (self.cum[i] + t * len, offset, dist)
-    }
-
-    fn best_in(&self, range: std::ops::Range<usize>, p: [f64; 2]) -> Projection {
-        let mut best = (
-            f64::INFINITY,
-            Projection {
-                s: 0.0,
-                offset: 0.0,
-                segment: 0,
-            },
-        );
-        for i in range {
-            let (s, offset, dist) = self.project_segment(i, p);
-            if dist < best.0 {
-                best = (
-                    dist,
-                    Projection {
-                        s,
-                        offset,
-                        segment: i,
-                    },
-                );
-            }
-        }
-        best.1
-    }
-
-    /// The closest point of the whole route.
-    pub fn project(&self, p: [f64; 2]) -> Projection {
-        self.best_in(0..self.points.len() - 1, p)
-    }
-
-    /// The closest point within a window around the previous projection's arc length `prev_s`
-    /// (15 m behind to 40 m ahead), so a route that passes near itself is followed in order.
-    pub fn project_near(&self, p: [f64; 2], prev_s: f64) -> Projection {
-        let lo = self.segment_at(prev_s - TRACK_BACK);
-        let hi = self.segment_at(prev_s + TRACK_AHEAD);
-        self.best_in(lo..hi + 1, p)
-    }
-
-    /// The index of the segment containing arc length `s` (clamped to the route).
-    pub fn segment_at(&self, s: f64) -> usize {
-        let n = self.points.len() - 1;
-        match self.cum.binary_search_by(|c| c.total_cmp(&s)) {
-            Ok(i) => i.min(n - 1),
-            Err(i) => i.saturating_sub(1).min(n - 1),
-        }
-    }
-
-    /// The point at arc length `s` (clamped).
-    pub fn point_at(&self, s: f64) -> [f64; 2] {
-        let i = self.segment_at(s);
-        let (a, b) = (self.points[i], self.points[i + 1]);
-        let len = self.cum[i + 1] - self.cum[i];
-        let t = ((s - self.cum[i]) / len).clamp(0.0, 1.0);
-        [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
-    }
-
-    /// Heading of the route at arc length `s`, radians.
-    pub fn heading_at(&self, s: f64) -> f64 {
-        let i = self.segment_at(s);
-        let (a, b) = (self.points[i], self.points[i + 1]);
-        (b[1] - a[1]).atan2(b[0] - a[0])
-    }
-
-    /// Signed curvature around arc length `s` (1/m, positive turning left): the change of
-    /// heading between `s - window` and `s + window` over the distance between them.
-    pub fn curvature_at(&self, s: f64, window: f64) -> f64 {
-        let (a, b) = ((s - window).max(0.0), (s + window).min(self.length()));
-        if b - a <= f64::EPSILON {
-            return 0.0;
-        }
-        let mut d = self.heading_at(b) - self.heading_at(a);
-        while d > std::f64::consts::PI {
-            d -= 2.0 * std::f64::consts::PI;
-        }
-        while d < -std::f64::consts::PI {
-            d += 2.0 * std::f64::consts::PI;
-        }
-        d / (b - a)
-    }
+/// Reads a route from a CSV of points (see [`read_xy_csv`]).
+pub fn load(path: &Path) -> Result<Route> {
+    let points = read_xy_csv(path)?;
+    Route::new(points).map_err(|reason| StudyError::Route {
+        path: path.to_path_buf(),
+        reason,
+    })
 }
 
 /// Reads points from a CSV with columns `x,y` (a header naming them, in any position, or no
 /// header and x, y as the first two columns). Lines starting with `#` are comments.
 pub fn read_xy_csv(path: &Path) -> Result<Vec<[f64; 2]>> {
     let text = std::fs::read_to_string(path).map_err(StudyError::io(path))?;
-    let bad = |reason: String| StudyError::Route {
+    perturb_core::route::parse_xy_csv(&text).map_err(|reason| StudyError::Route {
         path: path.to_path_buf(),
         reason,
-    };
-    let mut cols = (0, 1);
-    let mut points = Vec::new();
-    let mut first = true;
-    for (n, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if first {
-            first = false;
-            if cells.iter().any(|c| c.parse::<f64>().is_err()) {
-                let find = |name: &str| cells.iter().position(|c| c.eq_ignore_ascii_case(name));
-                match (find("x"), find("y")) {
-                    (Some(x), Some(y)) => {
-                        cols = (x, y);
-                        continue;
-                    }
-                    _ => {
-                        return Err(bad(format!(
-                            "line {}: expected a header with columns `x` and `y`, found `{line}`",
-                            n + 1
-                        )));
-                    }
-                }
-            }
-        }
-        let get = |i: usize| -> Result<f64> {
-            let c = cells.get(i).ok_or_else(|| {
-                bad(format!(
-                    "line {}: column {} is missing in `{line}`",
-                    n + 1,
-                    i + 1
-                ))
-            })?;
-            c.parse::<f64>()
-                .map_err(|_| bad(format!("line {}: `{c}` is not a number", n + 1)))
-        };
-        points.push([get(cols.0)?, get(cols.1)?]);
-    }
-    Ok(points)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn projects_with_signed_offsets_and_curvature() {
-        let r = Route::new(vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]).unwrap();
-        assert_eq!(r.length(), 20.0);
-        let p = r.project([4.0, 1.5]);
-        assert_eq!((p.s, p.offset, p.segment), (4.0, 1.5, 0));
-        let p = r.project([11.0, 5.0]); // right of the second segment (heading +y)
-        assert_eq!((p.s, p.offset), (15.0, -1.0));
-        assert!(r.curvature_at(10.0, 2.0) > 0.3); // a left turn
-        assert_eq!(r.curvature_at(3.0, 2.0), 0.0);
-        assert_eq!(r.point_at(12.5), [10.0, 2.5]);
-        assert!(Route::new(vec![[1.0, 1.0], [1.0, 1.0]]).is_err());
-    }
-
-    #[test]
-    fn tracking_follows_a_route_that_passes_near_itself() {
-        // Out along y = 0, back along y = 1 (a hairpin): the global projection of a point on
-        // the way back near the start would jump; tracking keeps the order.
-        let r = Route::new(vec![[0.0, 0.0], [100.0, 0.0], [100.0, 1.0], [0.0, 1.0]]).unwrap();
-        let global = r.project([5.0, 0.4]);
-        assert!(global.s < 10.0);
-        let tracked = r.project_near([5.0, 0.4], 190.0);
-        assert!((tracked.s - 196.0).abs() < 1e-9, "{tracked:?}");
-    }
+    })
 }

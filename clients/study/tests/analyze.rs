@@ -7,7 +7,6 @@ use perturb_study::analyze::{
     Aggregate, AnalyzeConfig, Failure, ObjectsConfig, ObjectsFrame, RunResult, TopicField,
     analyze_dir,
 };
-use perturb_study::route::Route;
 use support::{Run, route_length, tmp, write_route};
 
 fn close(a: Option<f64>, b: f64, tol: f64, what: &str) {
@@ -19,7 +18,7 @@ fn cfg(dir: &std::path::Path) -> AnalyzeConfig {
     let route = dir.join("route.csv");
     write_route(&route);
     AnalyzeConfig {
-        route: Some(Route::from_csv(&route).unwrap()),
+        route: Some(perturb_study::route::load(&route).unwrap()),
         pose: Some(TopicField {
             topic: "/odom".into(),
             field: None,
@@ -507,7 +506,7 @@ fn a_bad_run_is_reported_by_name_and_the_others_are_analysed() {
     // A one-point route is refused with the file named.
     let one = dir.join("one.csv");
     std::fs::write(&one, "x,y\n1,2\n").unwrap();
-    let e = Route::from_csv(&one).unwrap_err().to_string();
+    let e = perturb_study::route::load(&one).unwrap_err().to_string();
     assert!(e.contains("one.csv") && e.contains("at least 2"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -9,7 +9,6 @@ use perturb_study::analyze::{
     Aggregate, AnalyzeConfig, CteTo, Failure, Outcome, RunResult, TopicField, analyze_dir,
     load_events_bags, reference_from_runs,
 };
-use perturb_study::route::Route;
 use std::path::Path;
 use support::{Layout, Run, route_length, route_point, tmp, write_route};
 
@@ -29,7 +28,7 @@ fn with_route(dir: &Path) -> AnalyzeConfig {
     let route = dir.join("route.csv");
     write_route(&route);
     AnalyzeConfig {
-        route: Some(Route::from_csv(&route).unwrap()),
+        route: Some(perturb_study::route::load(&route).unwrap()),
         pose: odom(),
         ..AnalyzeConfig::default()
     }
@@ -186,7 +185,7 @@ fn runs_are_trimmed_to_the_route() {
     r.offset = Box::new(|_, _| 0.4);
     r.write(&runs_dir);
     let mut cfg = AnalyzeConfig {
-        route: Some(Route::from_csv(&route_csv).unwrap()),
+        route: Some(perturb_study::route::load(&route_csv).unwrap()),
         pose: odom(),
         ..AnalyzeConfig::default()
     };
