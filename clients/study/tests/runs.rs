@@ -584,3 +584,83 @@ fn a_signal_with_a_value_fires_when_the_field_changes_to_it() {
     assert_ne!(a.runs[0].metrics.failure, Some(Failure::Takeover));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The events of the bridge's safety envelope and campaigns (records of version 2): segments
+/// follow the campaign step; frames that went out raw because perturbd was late or down keep the
+/// run under its perturbation (counted in a note), a gap record's loss is noted, kill and arm
+/// records change nothing by themselves (the frames after them say what the ADS got).
+#[test]
+fn version_2_events_group_segments_by_step_and_count_fallbacks_and_gaps() {
+    use perturb_bag::events::{EventKind, EventRecord};
+    let dir = tmp("events-v2");
+    let runs_dir = dir.join("runs");
+    std::fs::create_dir_all(&runs_dir).unwrap();
+    let mut r = Run::new("campaign", 8.0);
+    // C-A1 s2 from 2 s to 6 s: campaign step 1 until 4 s, step 2 after; raw at 3.0-3.2 s
+    // (late); a gap of 7 frames (daemon down) at 5 s; the kill switch at 6 s.
+    r.cond = Some(Box::new(|t| (2.0..6.0).contains(&t).then_some(("C-A1", 2))));
+    r.records = Some(Box::new(|k, t, mut ev: EventRecord| {
+        if ev.applied {
+            ev.step = Some(if t < 4.0 { 1 } else { 2 });
+        }
+        let mut out = Vec::new();
+        if (3.0..3.25).contains(&t) {
+            ev.id = None;
+            ev.severity = None;
+            ev.seed = None;
+            ev.applied = false;
+            ev.reason = Some("late".into());
+            ev.step = None;
+        }
+        if k == 50 {
+            out.push(EventRecord::gap(
+                "camera",
+                "/camera/image",
+                50,
+                "daemon_down",
+                7,
+                0,
+            ));
+        }
+        if k == 60 {
+            out.push(EventRecord::kill(true, "takeover", 0));
+            assert_eq!(out[0].kind, EventKind::Kill);
+        }
+        if t >= 6.0 {
+            ev.reason = Some("killed".into());
+        }
+        out.push(ev);
+        out
+    }));
+    r.write(&runs_dir);
+    let cfg = AnalyzeConfig {
+        pose: odom(),
+        ..AnalyzeConfig::default()
+    };
+    let a = analyze_dir(&runs_dir, &cfg).unwrap();
+    assert!(a.errors.is_empty(), "{:?}", a.errors);
+    let run = run(&a.runs, "campaign");
+    let segs: Vec<(String, Option<u8>, Option<u16>, f64)> = run
+        .segments
+        .iter()
+        .map(|s| (s.perturbation.clone(), s.severity, s.step, s.start_s))
+        .collect();
+    let want = [
+        ("nominal", None, None, 0.0),
+        ("C-A1", Some(2), Some(1), 2.0),
+        ("C-A1", Some(2), Some(2), 4.0),
+        ("nominal", None, None, 6.0),
+    ];
+    assert_eq!(segs.len(), want.len(), "{segs:?}");
+    for (got, want) in segs.iter().zip(want) {
+        assert_eq!(
+            (got.0.as_str(), got.1, got.2),
+            (want.0, want.1, want.2),
+            "{segs:?}"
+        );
+        assert!((got.3 - want.3).abs() < 0.11, "{segs:?}");
+    }
+    let notes = run.notes.join("\n");
+    assert!(notes.contains("3 late"), "{notes}");
+    assert!(notes.contains("7 daemon_down"), "{notes}");
+}

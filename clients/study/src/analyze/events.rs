@@ -8,14 +8,14 @@
 use crate::error::{Result, StudyError};
 use crate::source::{find_runs, open_run};
 use perturb_bag::dynamic::{MessageCodec, Value};
-use perturb_bag::events::PerturbationEvent;
+use perturb_bag::events::EventRecord;
 use std::path::{Path, PathBuf};
 
 /// Perturbation events from bags of their own, in log-time order.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ExternalEvents {
     /// (log time ns, event), sorted by time.
-    pub events: Vec<(u64, PerturbationEvent)>,
+    pub events: Vec<(u64, EventRecord)>,
     /// The bags read.
     pub bags: Vec<PathBuf>,
     /// Messages that were not perturbation events (skipped).
@@ -25,11 +25,11 @@ pub struct ExternalEvents {
 impl ExternalEvents {
     /// The events with log times up to `end_ns`, from the last one before `start_ns` of each
     /// stream on (a stream's state at the start comes from its last event before it).
-    pub fn window(&self, start_ns: u64, end_ns: u64) -> Vec<&(u64, PerturbationEvent)> {
+    pub fn window(&self, start_ns: u64, end_ns: u64) -> Vec<&(u64, EventRecord)> {
         let first_in = self.events.partition_point(|(t, _)| *t < start_ns);
         let last = self.events.partition_point(|(t, _)| *t <= end_ns);
         // Earlier events only matter as each stream's last one.
-        let mut before: Vec<&(u64, PerturbationEvent)> = Vec::new();
+        let mut before: Vec<&(u64, EventRecord)> = Vec::new();
         for e in self.events[..first_in].iter().rev() {
             if !before.iter().any(|b| b.1.topic == e.1.topic) {
                 before.push(e);
@@ -69,7 +69,7 @@ pub fn load_events_bags(dir: &Path, topic: &str) -> Result<ExternalEvents> {
         let mut bad = 0usize;
         bag.read(&[topic.to_string()], &mut |m| {
             match codec.get(m.data, &path) {
-                Ok(Value::String(s)) => match serde_json::from_str::<PerturbationEvent>(&s) {
+                Ok(Value::String(s)) => match EventRecord::parse(&s) {
                     Ok(ev) => out.events.push((m.log_time, ev)),
                     Err(_) => bad += 1,
                 },

@@ -6,7 +6,7 @@ use super::{AnalyzeConfig, Condition, ObjectsFrame, TopicField};
 use crate::error::{Result, StudyError};
 use crate::source::{RunEntry, RunMessage, TopicSchema, open_run};
 use perturb_bag::dynamic::{DynError, FieldPath, MessageCodec, Value};
-use perturb_bag::events::PerturbationEvent;
+use perturb_bag::events::{EventKind, EventRecord};
 use std::collections::BTreeMap;
 
 /// One pose sample.
@@ -301,6 +301,8 @@ pub fn load_run(entry: &RunEntry, cfg: &AnalyzeConfig) -> Result<RunData> {
         last: 0,
         bad: BTreeMap::new(),
         stream_state: BTreeMap::new(),
+        fallbacks: BTreeMap::new(),
+        lost: BTreeMap::new(),
         other_streams: BTreeMap::new(),
         current: None,
         signal_state: [None; 2],
@@ -456,6 +458,10 @@ impl Readers {
     }
 }
 
+/// An event stream's perturbation (id, severity; None when off) and the campaign step that chose
+/// it.
+type StreamState = (Option<(String, u8)>, Option<u16>);
+
 /// The time series of a run as its messages arrive, and what could not be read.
 struct Collector<'a> {
     cfg: &'a AnalyzeConfig,
@@ -465,8 +471,14 @@ struct Collector<'a> {
     last: u64,
     /// Per topic: messages that could not be read, and the first reason.
     bad: BTreeMap<String, (usize, String)>,
-    /// Per event stream: its perturbation (id, severity), None when off.
-    stream_state: BTreeMap<String, Option<(String, u8)>>,
+    /// Per event stream: its perturbation (id, severity), None when off, and the campaign step
+    /// that chose it.
+    stream_state: BTreeMap<String, StreamState>,
+    /// Frames that went out raw in place of their perturbed version (late, perturbd down), per
+    /// reason: they do not change the condition.
+    fallbacks: BTreeMap<String, usize>,
+    /// Frames lost, per cause, as the gap records say.
+    lost: BTreeMap<String, u64>,
     /// Events of streams the configuration does not follow, per stream.
     other_streams: BTreeMap<String, usize>,
     current: Option<Condition>,
@@ -620,8 +632,9 @@ impl Collector<'_> {
     fn event(&mut self, e: &Reader, path: &FieldPath, m: RunMessage<'_>, t: f64) {
         let text = e.codec.get(m.data, path);
         let ev = match &text {
-            Ok(Value::String(s)) => serde_json::from_str::<PerturbationEvent>(s)
-                .map_err(|err| format!("not a perturbation event ({err})")),
+            Ok(Value::String(s)) => {
+                EventRecord::parse(s).map_err(|err| format!("not a perturbation event ({err})"))
+            }
             Ok(v) => Err(format!("expected a string, found a {}", v.kind())),
             Err(err) => Err(err.to_string()),
         };
@@ -632,21 +645,48 @@ impl Collector<'_> {
     }
 
     /// A perturbation event: the condition (every followed stream's perturbation) from `t` on.
-    fn apply_event(&mut self, ev: PerturbationEvent, t: f64) {
+    /// Gap records are counted, kill and arm records need nothing (the frames after them say
+    /// what the ADS got), and a frame that went out raw because perturbd was late or down does
+    /// not change the condition (it is counted): the run stays under the perturbation it was
+    /// given.
+    fn apply_event(&mut self, ev: EventRecord, t: f64) {
+        match ev.kind {
+            EventKind::Gap => {
+                let cause = ev.cause.clone().unwrap_or_else(|| "?".into());
+                *self.lost.entry(cause).or_default() += ev.count.unwrap_or(0);
+                return;
+            }
+            EventKind::Kill | EventKind::Arm => return,
+            EventKind::Frame | EventKind::Heartbeat => {}
+        }
         let streams = &self.cfg.event_streams;
         if !(streams.is_empty() || streams.contains(&ev.topic)) {
             *self.other_streams.entry(ev.topic.clone()).or_default() += 1;
+            return;
+        }
+        if let Some(why @ ("late" | "daemon_down")) = ev.reason.as_deref()
+            && !ev.applied
+        {
+            *self.fallbacks.entry(why.to_string()).or_default() += 1;
             return;
         }
         let state = match (ev.id, ev.severity) {
             (Some(id), Some(s)) => Some((id, s)),
             _ => None,
         };
-        self.stream_state.insert(ev.topic, state);
-        let mut c: Vec<(String, u8)> = self.stream_state.values().flatten().cloned().collect();
+        let step = state.as_ref().and(ev.step);
+        self.stream_state.insert(ev.topic, (state, step));
+        let mut c: Vec<(String, u8)> = self
+            .stream_state
+            .values()
+            .filter_map(|(s, _)| s.clone())
+            .collect();
         c.sort();
         c.dedup();
-        let c = Condition(c);
+        let mut steps: Vec<u16> = self.stream_state.values().filter_map(|(_, k)| *k).collect();
+        steps.sort();
+        steps.dedup();
+        let c = Condition(c, steps);
         if self.current.as_ref() != Some(&c) {
             self.d.events.push((t, c.clone()));
             self.current = Some(c);
@@ -667,6 +707,28 @@ impl Collector<'_> {
     /// The run's data with its notes; an error when nothing (or no pose) could be read.
     fn finish(self, run: &str, wanted: &[String], mut notes: Vec<String>) -> Result<RunData> {
         let cfg = self.cfg;
+        if !self.fallbacks.is_empty() {
+            let what: Vec<String> = self
+                .fallbacks
+                .iter()
+                .map(|(why, n)| format!("{n} {why}"))
+                .collect();
+            notes.push(format!(
+                "frames the ADS got raw in place of their perturbed version (perturbd late or down), counted under the perturbation the run had: {}",
+                what.join(", ")
+            ));
+        }
+        if !self.lost.is_empty() {
+            let what: Vec<String> = self
+                .lost
+                .iter()
+                .map(|(cause, n)| format!("{n} {cause}"))
+                .collect();
+            notes.push(format!(
+                "frames lost before the ADS (the events' gap records): {}",
+                what.join(", ")
+            ));
+        }
         if !cfg.event_streams.is_empty()
             && self.stream_state.is_empty()
             && !self.other_streams.is_empty()

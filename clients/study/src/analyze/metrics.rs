@@ -495,6 +495,7 @@ pub fn analyze_run(d: &RunData, cfg: &AnalyzeConfig, vehicles: Option<&[[f64; 2]
             group: d.group.clone(),
             perturbation: c.label(),
             severity: c.severity(),
+            step: c.step(),
             start_s: *a,
             end_s: a + m.duration_s,
             route_start: route
@@ -624,7 +625,7 @@ mod tests {
 
     #[test]
     fn short_segments_merge_into_the_next() {
-        let c = |id: &str| Condition(vec![(id.to_string(), 1)]);
+        let c = |id: &str| Condition(vec![(id.to_string(), 1)], Vec::new());
         let d = RunData {
             end: 10.0,
             poses: vec![PoseSample {
@@ -634,7 +635,10 @@ mod tests {
             }],
             events: vec![
                 (0.01, c("C-A1")),
-                (5.0, Condition(vec![("C-A1".into(), 1), ("L-A1".into(), 1)])),
+                (
+                    5.0,
+                    Condition(vec![("C-A1".into(), 1), ("L-A1".into(), 1)], Vec::new()),
+                ),
                 (5.1, c("L-A1")),
             ],
             ..RunData::default()

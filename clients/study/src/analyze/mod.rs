@@ -302,9 +302,10 @@ impl Outcome {
 }
 
 /// Which perturbations were active: empty for nominal, one (perturbation, severity) per stream
-/// otherwise (sorted, duplicates removed).
+/// otherwise (sorted, duplicates removed); and the campaign steps that chose them (sorted, empty
+/// when no campaign did).
 #[derive(Clone, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct Condition(pub Vec<(String, u8)>);
+pub struct Condition(pub Vec<(String, u8)>, pub Vec<u16>);
 
 impl Condition {
     /// `nominal`, the perturbation ID, or IDs joined with `+`.
@@ -327,6 +328,14 @@ impl Condition {
     /// True when nothing was active.
     pub fn is_nominal(&self) -> bool {
         self.0.is_empty()
+    }
+
+    /// The campaign step, when one step chose every active perturbation.
+    pub fn step(&self) -> Option<u16> {
+        match self.1.as_slice() {
+            [s] => Some(*s),
+            _ => None,
+        }
     }
 }
 
@@ -370,6 +379,8 @@ pub struct SegmentResult {
     pub perturbation: String,
     /// The severity, when one perturbation at one severity was active.
     pub severity: Option<u8>,
+    /// The campaign step that chose the segment's perturbation (1-based), when one did.
+    pub step: Option<u16>,
     /// Seconds from the run's start to the segment's start.
     pub start_s: f64,
     /// Seconds from the run's start to the segment's end (or failure).

@@ -80,6 +80,7 @@ pub fn render_segments(segments: &[SegmentResult], format: Format) -> String {
         ("run", false),
         ("perturbation", false),
         ("severity", true),
+        ("step", true),
         ("start_s", true),
         ("end_s", true),
     ];
@@ -90,6 +91,7 @@ pub fn render_segments(segments: &[SegmentResult], format: Format) -> String {
             s.run.clone(),
             s.perturbation.clone(),
             sev(s.severity),
+            s.step.map_or_else(|| "-".to_string(), |k| k.to_string()),
             format!("{:.1}", s.start_s),
             format!("{:.1}", s.end_s),
         ];

@@ -7,7 +7,7 @@
 #![allow(dead_code)]
 
 use perturb_bag::dynamic::{MessageCodec, Value};
-use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, PerturbationEvent};
+use perturb_bag::events::{EVENTS_TOPIC, EVENTS_TYPE, EventRecord};
 use perturb_bag::ros1::{Ros1Writer, Ros1WriterOptions};
 use perturb_bag::{BagWriter, Compression, WriterOptions};
 use std::collections::BTreeMap;
@@ -185,7 +185,13 @@ pub struct Run {
     pub pose_stamped: bool,
     /// Leave out the pose topic.
     pub no_pose: bool,
+    /// Rewrites each events record (message k at time t) into the records written in its place
+    /// (none, itself, or more: fallbacks, campaign steps, gap and kill records).
+    pub records: Option<RecordsFn>,
 }
+
+/// See [`Run::records`].
+pub type RecordsFn = Box<dyn Fn(usize, f64, EventRecord) -> Vec<EventRecord>>;
 
 impl Run {
     /// A run at 10 m/s along the route, stopping at its end, offset 0, no steering, nominal.
@@ -203,6 +209,7 @@ impl Run {
             objects: None,
             pose_stamped: false,
             no_pose: false,
+            records: None,
         }
     }
 
@@ -434,18 +441,23 @@ impl Run {
                 break;
             }
             let c = cond(t);
-            let ev = PerturbationEvent {
-                topic: "/camera/image".into(),
-                stream: Some("camera".into()),
-                seq: k,
-                stamp_sec: 0,
-                stamp_nanosec: 0,
-                frame_id: "camera".into(),
-                id: c.map(|c| c.0.to_string()),
-                severity: c.map(|c| c.1),
-                seed: c.map(|_| 1),
+            let ev = EventRecord::frame(
+                "camera",
+                "/camera/image",
+                k as u64,
+                (0, 0),
+                "camera",
+                c.map(|c| (c.0, c.1, 1)),
+                None,
+                0,
+            );
+            let records = match &self.records {
+                Some(f) => f(k, t, ev),
+                None => vec![ev],
             };
-            out.push((t, serde_json::to_string(&ev).unwrap()));
+            for r in records {
+                out.push((t, serde_json::to_string(&r).unwrap()));
+            }
         }
         out
     }
