@@ -15,6 +15,7 @@ use crate::dds::rustdds_backend::RustddsBackend;
 use crate::ros1::{Node, Publisher, Subscriber};
 use anyhow::{Context, Result};
 use perturb_bag::dynamic::{FieldPath, MessageCodec, Value};
+use perturb_core::formats::kinds::Kind;
 use perturb_core::formats::ros1::MsgType;
 use std::sync::Arc;
 use std::time::Duration;
@@ -28,25 +29,34 @@ pub enum Wire {
     Cdr,
 }
 
-/// A message type known by name on both sides: its ROS 1 name, md5sum and definition, its ROS 2
-/// name and definition.
+/// A small message type: its row of the message-kind table, and the ROS 2 definition the
+/// bridge decodes it by (empty for a type it only relays).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SmallType {
-    /// `std_msgs/Bool`.
-    pub ros1: MsgType,
+    /// The kind.
+    pub kind: Kind,
     /// The ROS 2 definition (`ros2msg`, with its dependencies).
     pub ros2_definition: &'static str,
 }
 
 impl SmallType {
+    /// The ROS 1 type.
+    pub fn ros1(&self) -> MsgType {
+        self.kind.info().ros1
+    }
+
     /// The DDS type name (`std_msgs::msg::dds_::Bool_`).
-    pub fn dds_name(&self) -> String {
-        dds_name(self.ros1.ros2_name)
+    pub fn dds_name(&self) -> &'static str {
+        self.kind.info().dds_name
     }
 }
 
-/// The DDS type name of a ROS 2 type (`pkg/msg/Type` -> `pkg::msg::dds_::Type_`).
+/// The DDS type name of a ROS 2 type (`pkg/msg/Type` -> `pkg::msg::dds_::Type_`), for types
+/// outside the message-kind table.
 pub fn dds_name(ros2: &str) -> String {
+    if let Some(k) = Kind::parse(ros2) {
+        return k.info().dds_name.to_string();
+    }
     let parts: Vec<&str> = ros2.split('/').collect();
     match parts.as_slice() {
         [pkg, sub, ty] => format!("{pkg}::{sub}::dds_::{ty}_"),
@@ -60,34 +70,21 @@ const SEP: &str =
 
 /// `std_msgs/String`.
 pub const STRING: SmallType = SmallType {
-    ros1: perturb_core::formats::ros1::STRING,
+    kind: Kind::String,
     ros2_definition: "string data\n",
 };
 
 /// `std_msgs/Bool`.
 pub const BOOL: SmallType = SmallType {
-    ros1: MsgType {
-        name: "std_msgs/Bool",
-        ros2_name: "std_msgs/msg/Bool",
-        md5sum: "8b94c1b53db61fb6aed406028ad6332a",
-        definition: include_str!("msgs_ros1/std_msgs-Bool.txt"),
-    },
+    kind: Kind::Bool,
     ros2_definition: "bool data\n",
 };
 
 /// `sensor_msgs/CameraInfo` (relayed as bytes, never decoded: no ROS 2 definition needed).
 pub const CAMERA_INFO: SmallType = SmallType {
-    ros1: MsgType {
-        name: "sensor_msgs/CameraInfo",
-        ros2_name: "sensor_msgs/msg/CameraInfo",
-        md5sum: "c9a58c1b0b154e0e6da7578cb991d214",
-        definition: include_str!("msgs_ros1/sensor_msgs-CameraInfo.txt"),
-    },
+    kind: Kind::CameraInfo,
     ros2_definition: "",
 };
-
-/// The ROS 1 types of this module, for the check against Debian's rospy.
-pub const ROS1_TYPES: [MsgType; 2] = [BOOL.ros1, CAMERA_INFO.ros1];
 
 const ROS2_HEADER: &str = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n";
 const ROS2_POSE: &str = "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n";
@@ -179,18 +176,6 @@ pub enum SmallEndpoint {
     Dds(Arc<RustddsBackend>),
 }
 
-/// A ROS 1 type from a name given at run time (a relay republishes what its source publishes):
-/// the strings live as long as the process (a configuration has a handful).
-fn leaked(name: &str, md5sum: &str, definition: &str) -> MsgType {
-    let l = |s: &str| -> &'static str { Box::leak(s.to_string().into_boxed_str()) };
-    MsgType {
-        name: l(name),
-        ros2_name: l(name),
-        md5sum: l(md5sum),
-        definition: l(definition),
-    }
-}
-
 /// A ROS 1 subscription of any type (`*`): the publisher's header says what it sends.
 pub const ANY: MsgType = MsgType {
     name: "*",
@@ -204,29 +189,10 @@ impl SmallEndpoint {
     pub fn writer(&self, topic: &str, ty: SmallType, qos: Qos) -> Result<Box<dyn SmallWriter>> {
         Ok(match self {
             SmallEndpoint::Ros1(n) => Box::new(Ros1Small {
-                publisher: n.advertise(topic, ty.ros1)?,
+                publisher: n.advertise(topic, ty.ros1())?,
             }),
             SmallEndpoint::Dds(d) => Box::new(DdsSmall {
-                writer: d.raw_writer(topic, &ty.dds_name(), qos)?,
-            }),
-        })
-    }
-
-    /// A ROS 1 writer of a type known by name, md5sum and definition at run time (a relay).
-    pub fn writer_as(
-        &self,
-        topic: &str,
-        name: &str,
-        md5sum: &str,
-        definition: &str,
-        qos: Qos,
-    ) -> Result<Box<dyn SmallWriter>> {
-        Ok(match self {
-            SmallEndpoint::Ros1(n) => Box::new(Ros1Small {
-                publisher: n.advertise(topic, leaked(name, md5sum, definition))?,
-            }),
-            SmallEndpoint::Dds(d) => Box::new(DdsSmall {
-                writer: d.raw_writer(topic, &dds_name(name), qos)?,
+                writer: d.raw_writer(topic, ty.dds_name(), qos)?,
             }),
         })
     }

@@ -21,6 +21,7 @@ pub mod msgs;
 pub mod rustdds_backend;
 
 use crate::frame::Payload;
+use perturb_core::formats::kinds::Kind;
 use perturb_core::formats::ros::{CompressedImageMsg, ImageMsg, PointCloud2Msg};
 use std::time::Duration;
 
@@ -38,46 +39,37 @@ pub enum RosType {
 }
 
 impl RosType {
+    /// Its row of the message-kind table ([`perturb_core::formats::kinds`]).
+    pub fn kind(self) -> Kind {
+        match self {
+            RosType::Image => Kind::Image,
+            RosType::CompressedImage => Kind::CompressedImage,
+            RosType::PointCloud2 => Kind::PointCloud2,
+        }
+    }
+
     /// The ROS 2 type name (`sensor_msgs/msg/Image`).
     pub fn ros_name(self) -> &'static str {
-        match self {
-            RosType::Image => "sensor_msgs/msg/Image",
-            RosType::CompressedImage => "sensor_msgs/msg/CompressedImage",
-            RosType::PointCloud2 => "sensor_msgs/msg/PointCloud2",
-        }
+        self.kind().ros2_name()
     }
 
     /// The DDS type name (`sensor_msgs::msg::dds_::Image_`).
     pub fn dds_name(self) -> &'static str {
-        match self {
-            RosType::Image => "sensor_msgs::msg::dds_::Image_",
-            RosType::CompressedImage => "sensor_msgs::msg::dds_::CompressedImage_",
-            RosType::PointCloud2 => "sensor_msgs::msg::dds_::PointCloud2_",
-        }
+        self.kind().info().dds_name
     }
 
     /// The type's last name (`Image`).
     pub fn short_name(self) -> &'static str {
-        match self {
-            RosType::Image => "Image",
-            RosType::CompressedImage => "CompressedImage",
-            RosType::PointCloud2 => "PointCloud2",
-        }
+        self.kind().short_name()
     }
 
-    /// Parses a type as written in a config or a bag (`image`, `sensor_msgs/msg/Image`, ...).
+    /// Parses a sensor type as written in a config or a bag (`image`, `sensor_msgs/msg/Image`,
+    /// any spelling the message-kind table knows).
     pub fn parse(s: &str) -> Option<Self> {
-        Some(match s {
-            "image" | "Image" | "sensor_msgs/msg/Image" | "sensor_msgs/Image" => RosType::Image,
-            "compressed_image"
-            | "CompressedImage"
-            | "sensor_msgs/msg/CompressedImage"
-            | "sensor_msgs/CompressedImage" => RosType::CompressedImage,
-            "pointcloud2"
-            | "point_cloud2"
-            | "PointCloud2"
-            | "sensor_msgs/msg/PointCloud2"
-            | "sensor_msgs/PointCloud2" => RosType::PointCloud2,
+        Some(match Kind::parse(s)? {
+            Kind::Image => RosType::Image,
+            Kind::CompressedImage => RosType::CompressedImage,
+            Kind::PointCloud2 => RosType::PointCloud2,
             _ => return None,
         })
     }

@@ -122,11 +122,7 @@ fn machine_hostname() -> String {
 
 /// The ROS 1 type of a bridge message type.
 pub fn msg_type(t: RosType) -> MsgType {
-    match t {
-        RosType::Image => ros1::IMAGE,
-        RosType::CompressedImage => ros1::COMPRESSED_IMAGE,
-        RosType::PointCloud2 => ros1::POINT_CLOUD2,
-    }
+    t.kind().info().ros1
 }
 
 /// Decodes a ROS 1 message of `ty`: the header's `seq` and the message.

@@ -40,16 +40,14 @@ pub enum SensorType {
 }
 
 impl SensorType {
-    /// The sensor type of a type name in its ROS 2 or ROS 1 spelling.
+    /// The sensor type of a type name in its ROS 2 or ROS 1 spelling (the message-kind table,
+    /// [`perturb_core::formats::kinds`]).
     pub fn of(type_name: &str) -> Option<Self> {
-        match type_name {
-            "sensor_msgs/msg/Image" | "sensor_msgs/Image" => Some(SensorType::Image),
-            "sensor_msgs/msg/CompressedImage" | "sensor_msgs/CompressedImage" => {
-                Some(SensorType::CompressedImage)
-            }
-            "sensor_msgs/msg/PointCloud2" | "sensor_msgs/PointCloud2" => {
-                Some(SensorType::PointCloud2)
-            }
+        use perturb_core::formats::kinds::Kind;
+        match Kind::parse(type_name)? {
+            Kind::Image => Some(SensorType::Image),
+            Kind::CompressedImage => Some(SensorType::CompressedImage),
+            Kind::PointCloud2 => Some(SensorType::PointCloud2),
             _ => None,
         }
     }

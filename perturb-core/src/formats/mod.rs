@@ -13,7 +13,11 @@
 //! | PCD v0.7 (ascii, binary, binary_compressed; any fields) | [`pcd`] |
 //! | `sensor_msgs/Image`, `CompressedImage`, `PointCloud2` in CDR | [`ros`] |
 //! | the same, `std_msgs/String` and `rosgraph_msgs/Clock` in ROS 1 serialization | [`ros1`] |
+//!
+//! [`kinds`] is the one table of the message kinds (names in every spelling, md5sums,
+//! definitions) that the bridge and the bag crate read.
 
+pub mod kinds;
 pub mod kitti;
 pub mod kitti_labels;
 pub mod pcd;

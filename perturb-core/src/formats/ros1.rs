@@ -82,16 +82,10 @@ pub const CLOCK: MsgType = MsgType {
     definition: include_str!("ros1_msg/rosgraph_msgs-Clock.txt"),
 };
 
-/// Every type this module serializes.
-pub const TYPES: [MsgType; 5] = [IMAGE, COMPRESSED_IMAGE, POINT_CLOUD2, STRING, CLOCK];
-
-/// The type named `name`, in its ROS 1 (`sensor_msgs/Image`) or ROS 2 (`sensor_msgs/msg/Image`)
-/// spelling.
+/// The ROS 1 type named `name`, in any spelling the message-kind table knows
+/// ([`super::kinds`]: `sensor_msgs/Image`, `sensor_msgs/msg/Image`, ...).
 pub fn msg_type(name: &str) -> Option<MsgType> {
-    TYPES
-        .iter()
-        .find(|t| t.name == name || t.ros2_name == name)
-        .copied()
+    super::kinds::Kind::parse(name).map(|k| k.info().ros1)
 }
 
 /// Little-endian packed reader.

@@ -179,7 +179,7 @@ impl Ros1Writer {
     }
 
     /// Adds a topic of a type this project serializes (`sensor_msgs/Image` or
-    /// `sensor_msgs/msg/Image`, ...; see [`perturb_core::formats::ros1::TYPES`]); returns its
+    /// `sensor_msgs/msg/Image`, ...; see [`perturb_core::formats::kinds::KINDS`]); returns its
     /// connection id.
     pub fn add_topic(&mut self, topic: &str, type_name: &str) -> Result<u16, BagError> {
         let t = perturb_core::formats::ros1::msg_type(type_name).ok_or_else(|| {
