@@ -147,11 +147,60 @@ def gaps(frames):
     return max((b - a for a, b in zip(t, t[1:])), default=0) / 1e6
 
 
+def bayer(r, tmp, a):
+    """The vehicle's cameras: bayer_rggb8 at 2064x1544, 30 Hz, from a roscpp publisher (the test
+    build of tests/support/ros1_cpp_pub.cpp) through the bridge's ROS 1 ingress, perturbd (off,
+    then C-A1 severity 2: demosaic, perturbation, mosaic back) and the ROS 1 egress to a rospy
+    subscriber: the bridge's egress latency (ingress -> ROS 1 write returned) p50 / p99."""
+    cpp = ROOT / "target/roscpp/ros1_cpp_pub"
+    if not cpp.exists():
+        print(f"  {cpp} missing: run the ROS 1 tests once (they build it)")
+        return
+    print("## bayer_rggb8 2064x1544 at 30 Hz, ROS 1 in and out: egress latency p50 / p99 ms")
+    for label, pert in [("off", ""), ("C-A1 s2", 'perturbation = { id = "C-A1", severity = 2, seed = 1 }\n')]:
+        cfg = tmp / "perturbd-bayer.toml"
+        cfg.write_text(f'[[streams]]\nname = "cam"\nmodality = "camera"\n{pert}')
+        d = r.daemon(cfg)
+        bcfg = tmp / "bridge-bayer.toml"
+        bcfg.write_text(f"""[bridge]
+name = "meas_bayer"
+report = "{tmp}/report-bayer.json"
+[ros1]
+hostname = "127.0.0.1"
+[[ingress]]
+topic = "/sensors/cam"
+type = "image"
+stream = "cam"
+transport = "ros1"
+[[egress]]
+stream = "cam"
+topic = "/ads/camera"
+transport = "ros1"
+""")
+        sub = r.sub("/ads/camera", "image", "cam")
+        b = r.bridge(bcfg)
+        time.sleep(2)
+        p = subprocess.run([str(cpp), "/sensors/cam", str(int(30 * a.seconds)), "30", "2064",
+                            "1544", "bayer_rggb8", "1000"], env=r.env, capture_output=True)
+        time.sleep(1)
+        stop(b)
+        got = lines(sub)
+        stop(d)
+        rep = json.loads((tmp / "report-bayer.json").read_text())
+        eg = next(x for x in rep if x["name"].startswith("egress"))
+        ing = next(x for x in rep if x["name"].startswith("ingress"))
+        lat = eg["latency"]
+        enc = {f.get("encoding") for f in got}
+        print(f"  perturbation {label}: {lat['p50_ms']:.2f} / {lat['p99_ms']:.2f} ({lat['n']} frames; "
+              f"ingress received {ing['received']}, rospy got {len(got)} {sorted(enc)}; "
+              f"roscpp exit {p.returncode})")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bin", default=str(ROOT / "target/release"))
     ap.add_argument("--seconds", type=float, default=20.0)
-    ap.add_argument("--only", choices=["healthy", "faults", "restart"])
+    ap.add_argument("--only", choices=["healthy", "faults", "restart", "bayer"])
     a = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="perturb-safety-"))
     daemon_cfg = tmp / "perturbd.toml"
@@ -161,6 +210,8 @@ def main():
                           'perturbation = { id = "L-B1", severity = 1, seed = 1 }\n')
     r = Run(a.bin, tmp)
     try:
+        if a.only == "bayer":
+            return bayer(r, tmp, a)
         print("## healthy pipeline: egress latency (source -> ROS 1 write returned), p50 / p99 ms")
         for mode in ([] if a.only not in (None, "healthy") else ["raw", "wait"]):
             d = r.daemon(daemon_cfg)
