@@ -234,6 +234,17 @@ mod tests {
     "#;
 
     #[test]
+    fn a_report_in_a_missing_folder_is_refused_naming_the_key() {
+        let e =
+            check_report_path(std::path::Path::new("/nonexistent-folder-xyz/r.json")).unwrap_err();
+        assert!(
+            e.contains("daemon.report") && e.contains("does not exist"),
+            "{e}"
+        );
+        assert!(check_report_path(std::path::Path::new("report.json")).is_ok());
+    }
+
+    #[test]
     fn good_config_parses_with_defaults() {
         let c = Config::parse(GOOD).unwrap();
         assert_eq!(c.streams[0].input_service(), "cam/raw");

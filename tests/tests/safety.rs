@@ -680,3 +680,64 @@ fn a_campaign_switches_steps_where_the_vehicle_is_and_the_events_carry_the_step(
         );
     }
 }
+
+/// The kill switch from a ROS 2 topic (`std_msgs/msg/Bool` published by the independent Cyclone
+/// DDS peer): the bridge reads it over its RustDDS participant of small topics and engages the
+/// daemon's latch.
+#[test]
+fn a_ros2_kill_topic_engages_the_daemons_latch() {
+    if !have_everything() {
+        return;
+    }
+    let ns = Namespace::new("safety-kill2");
+    let domain = domain_of(3);
+    let daemon_cfg = ns.dir.join("perturbd.toml");
+    write(&daemon_cfg, DAEMON);
+    let cfg = ns.dir.join("bridge.toml");
+    write(
+        &cfg,
+        &format!(
+            "[bridge]\nname = \"kill2\"\n\n[dds]\ndomain_id = {domain}\ninterfaces = [\"lo\"]\n\n\
+             [[synthetic.camera]]\nstream = \"cam\"\nwidth = 160\nheight = 100\nrate_hz = 30\nprerender = 2\n\n\
+             [[egress]]\nstream = \"cam\"\ntopic = \"/ads/camera\"\n\n\
+             [kill]\ntopic = \"/vehicle/takeover\"\n"
+        ),
+    );
+    let _daemon = ns.start_daemon(&daemon_cfg);
+    let mut bridge = start_bridge(&ns, None, &cfg, "bridge.log");
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(
+        !ctl_status(&ns).contains("KILL SWITCH"),
+        "killed before the topic said so"
+    );
+    let dom = domain.to_string();
+    let mut p = dds_peer(&[
+        "publish",
+        "--topic",
+        "/vehicle/takeover",
+        "--type",
+        "bool",
+        "--count",
+        "5",
+        "--rate",
+        "10",
+        "--value",
+        "1",
+        "--domain",
+        &dom,
+    ]);
+    let _ = p.wait();
+    assert!(
+        wait_until(Duration::from_secs(10), || ctl_status(&ns)
+            .contains("KILL SWITCH ENGAGED")),
+        "the daemon was not killed: {}\n{}",
+        ctl_status(&ns),
+        log(&ns, "bridge.log")
+    );
+    assert!(
+        ctl_status(&ns).contains("/vehicle/takeover"),
+        "{}",
+        ctl_status(&ns)
+    );
+    assert!(interrupt(&mut bridge), "{}", log(&ns, "bridge.log"));
+}

@@ -777,6 +777,79 @@ streams = ["camera_front", "lidar_top"]
         assert_eq!(e.key, "bridge.stop_after_publishers_gone");
     }
 
+    /// What the outside test found `--check` let through: a frame_id longer than the wire
+    /// header holds, `subscriber_buffer = 0`, a report in a folder that does not exist, stream
+    /// names the daemon would refuse; and the new sections' keys.
+    #[test]
+    fn check_refuses_what_would_fail_later_naming_the_key() {
+        let long = "f".repeat(300);
+        let e = parse(&format!(
+            "[[synthetic.camera]]\nstream = \"c\"\nwidth = 64\nheight = 48\nframe_id = \"{long}\"\n"
+        ))
+        .unwrap_err();
+        assert_eq!(e.key, "synthetic.camera[0].frame_id");
+        assert!(e.problem.contains("256"), "{e}");
+        let e = parse(
+            "[bridge]\nqos = { subscriber_buffer = 0 }\n[[synthetic.lidar]]\nstream = \"l\"\n",
+        )
+        .unwrap_err();
+        assert_eq!(e.key, "bridge.qos");
+        assert!(e.problem.contains("subscriber_buffer"), "{e}");
+        let e = parse(
+            "[bridge]\nreport = \"/nonexistent-folder-xyz/report.json\"\n[[synthetic.lidar]]\nstream = \"l\"\n",
+        )
+        .unwrap_err();
+        assert_eq!(e.key, "bridge.report");
+        assert!(e.problem.contains("does not exist"), "{e}");
+        for bad in ["a/../b", "/a", "a//b", "a b"] {
+            let e = parse(&format!("[[synthetic.lidar]]\nstream = \"{bad}\"\n")).unwrap_err();
+            assert_eq!(e.key, "synthetic.lidar[0].stream", "{bad}");
+        }
+        let cam = "[[ingress]]\ntopic = \"/a\"\ntype = \"image\"\nstream = \"s\"\n";
+        let e = parse(&format!(
+            "{cam}[[egress]]\nstream = \"s\"\ntopic = \"/b\"\ncamera_info = \"/b_info\"\n"
+        ))
+        .unwrap_err();
+        assert_eq!(e.key, "egress[0].camera_info");
+        assert!(e.problem.contains("names the camera_info"), "{e}");
+        let e = parse(&format!(
+            "{cam}[[egress]]\nstream = \"s\"\ntopic = \"/b\"\ndeadline_ms = 0\n"
+        ))
+        .unwrap_err();
+        assert_eq!(e.key, "egress[0].deadline_ms");
+        let e = parse(&format!("{cam}[events]\ntopic = \"/a\"\n")).unwrap_err();
+        assert_eq!(e.key, "events.topic");
+        let e = parse(&format!(
+            "{cam}[kill]\ntopic = \"/k\"\ntype = \"my_msgs/msg/Engage\"\n"
+        ))
+        .unwrap_err();
+        assert_eq!(e.key, "kill.definition");
+        let e = parse(&format!("{cam}[kill]\ntopic = \"/k\"\nfield = \"state\"\n")).unwrap_err();
+        assert_eq!(e.key, "kill.field");
+        assert!(e.problem.contains("state"), "{e}");
+        let e = parse(&format!(
+            "{cam}[kill]\ntopic = \"/k\"\nkill_when = true\nkill_unless = false\n"
+        ))
+        .unwrap_err();
+        assert_eq!(e.key, "kill.kill_unless");
+        let ok = parse(&format!(
+            "{cam}[kill]\ntopic = \"/k\"\ntype = \"my_msgs/msg/Mode\"\nfield = \"mode\"\nkill_when = 2\n\
+             definition = \"uint8 mode\"\n[pose]\ntopic = \"/odom\"\ntype = \"nav_msgs/msg/Odometry\"\n"
+        ))
+        .unwrap();
+        assert!(
+            ok.kill
+                .unwrap()
+                .rule()
+                .kills(&perturb_bag::dynamic::Value::Int(2))
+        );
+        let e = parse(&format!(
+            "{cam}[pose]\ntopic = \"/odom\"\ntype = \"std_msgs/msg/Bool\"\n"
+        ))
+        .unwrap_err();
+        assert_eq!(e.key, "pose.field");
+    }
+
     /// A 16384x16384 synthetic camera pre-rendered 24 GB before it published anything (and
     /// heeded no SIGINT meanwhile): the frame size and the pre-render memory are bounded, and
     /// the command line's pre-render shrinks to what fits.

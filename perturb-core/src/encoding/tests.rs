@@ -488,6 +488,7 @@ fn a_short_output_or_a_wrong_working_view_is_an_error() {
 /// Both copies of the row kernels (baseline and, on CPUs that have it, AVX2) on frames wide
 /// enough for several blocks and a remainder.
 fn on_both_paths(f: impl Fn()) {
+    let _dispatch = crate::camera::ops::dispatch_lock();
     for baseline in [true, false] {
         crate::camera::ops::force_baseline(baseline);
         f();

@@ -498,7 +498,7 @@ mod tests {
         );
         assert_eq!(msg_type("sensor_msgs/msg/PointCloud2"), Some(POINT_CLOUD2));
         assert_eq!(msg_type("sensor_msgs/Image"), Some(IMAGE));
-        assert_eq!(msg_type("sensor_msgs/CameraInfo"), None);
+        assert_eq!(msg_type("sensor_msgs/Imu"), None);
         assert!(IMAGE.definition.contains("MSG: std_msgs/Header\n"));
         assert!(
             POINT_CLOUD2

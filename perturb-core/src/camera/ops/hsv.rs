@@ -348,6 +348,7 @@ mod tests {
             .into_iter()
             .chain(crate::camera::color::SATURATION_DECREASE)
             .chain([0.0, 0.5, 1.0, 2.0, 7.5, 300.0]);
+        let _dispatch = super::super::dispatch_lock();
         let wide = super::super::wide_available();
         let mut planes = [[0u8; 256]; 3];
         let mut kernel = [[0u8; 256]; 3];

@@ -24,4 +24,13 @@ pub(crate) use interleave::{pixel_blocks, plane_blocks};
 pub use rows::*;
 pub(crate) use simd::wide_fn;
 pub use simd::*;
+
+/// Serializes the tests of this crate that switch the dispatch ([`force_baseline`]) with those
+/// whose assertions depend on it (a kernel that reports how much it did): the switch is
+/// process-wide and the test harness runs tests on parallel threads.
+#[cfg(test)]
+pub(crate) fn dispatch_lock() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|p| p.into_inner())
+}
 pub use transpose::*;

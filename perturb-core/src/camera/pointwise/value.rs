@@ -132,6 +132,7 @@ mod tests {
 
     #[test]
     fn the_wide_kernel_scales_every_channel_and_value_like_the_pixel_code() {
+        let _dispatch = crate::camera::ops::dispatch_lock();
         // Every (channel, value) pair, with the value in each of the three channels, and black;
         // a tail that is not a whole block. Without AVX2 the kernel writes nothing (checked too).
         let mut pixels = vec![[0, 0, 0]];
