@@ -17,6 +17,7 @@ pub mod error;
 pub mod formats;
 pub mod image;
 pub mod lidar;
+pub mod math;
 pub mod metrics;
 pub mod percentile;
 pub mod perturber;

@@ -203,7 +203,7 @@ impl Rng {
 
     /// An exponential draw with the given mean.
     pub fn exponential(&mut self, mean: f64) -> f64 {
-        -mean * (1.0 - self.f64()).ln()
+        -mean * crate::math::log(1.0 - self.f64())
     }
 
     /// A Poisson draw with mean `lambda` (inversion for small means, a normal approximation with
@@ -219,7 +219,7 @@ impl Rng {
         // Inversion by sequential search, started from the mode for large means.
         let mut u = self.f64();
         let mut k = 0u64;
-        let mut p = (-lambda).exp();
+        let mut p = crate::math::exp(-lambda);
         if p > 0.0 {
             loop {
                 if u < p || k > 10_000 {
@@ -254,7 +254,7 @@ impl Rng {
         }
         // Inversion on the binomial pmf.
         let q = 1.0 - p;
-        let mut pmf = q.powf(n as f64);
+        let mut pmf = crate::math::pow(q, n as f64);
         if pmf <= 0.0 {
             let x = mean + var.sqrt() * self.normal() + 0.5;
             return x.clamp(0.0, n as f64) as u64;
@@ -319,7 +319,7 @@ pub fn for_each_normal_triple(rng: &mut Rng, n: usize, mut f: impl FnMut(usize, 
 #[inline]
 fn polar_factor(u: f64, v: f64) -> f64 {
     let s = u * u + v * v;
-    (-2.0 * s.ln() / s).sqrt()
+    (-2.0 * crate::math::log(s) / s).sqrt()
 }
 
 /// The standard normal quantile function (inverse CDF), accurate to about 1e-9 (Acklam's rational
@@ -362,7 +362,7 @@ pub fn normal_quantile(p: f64) -> f64 {
     ];
     let plow = 0.02425;
     let x = if p < plow {
-        let q = (-2.0 * p.ln()).sqrt();
+        let q = (-2.0 * crate::math::log(p)).sqrt();
         (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
             / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
     } else if p <= 1.0 - plow {
@@ -371,13 +371,13 @@ pub fn normal_quantile(p: f64) -> f64 {
         (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
             / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
     } else {
-        let q = (-2.0 * (1.0 - p).ln()).sqrt();
+        let q = (-2.0 * crate::math::log(1.0 - p)).sqrt();
         -(((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
             / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
     };
     // One Halley step against the complementary error function.
     let e = 0.5 * erfc(-x / std::f64::consts::SQRT_2) - p;
-    let u = e * (2.0 * std::f64::consts::PI).sqrt() * (x * x / 2.0).exp();
+    let u = e * (2.0 * std::f64::consts::PI).sqrt() * crate::math::exp(x * x / 2.0);
     x - u / (1.0 + x * u / 2.0)
 }
 
@@ -426,7 +426,7 @@ pub fn erfc(x: f64) -> f64 {
         d = ty * d - dd + c;
         dd = tmp;
     }
-    let r = t * (-z * z + 0.5 * (COF[0] + ty * d) - dd).exp();
+    let r = t * crate::math::exp(-z * z + 0.5 * (COF[0] + ty * d) - dd);
     if x >= 0.0 { r } else { 2.0 - r }
 }
 

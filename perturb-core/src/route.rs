@@ -47,7 +47,7 @@ impl Route {
         }
         let mut cum = vec![0.0];
         for w in pts.windows(2) {
-            let d = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+            let d = crate::math::hypot(w[1][0] - w[0][0], w[1][1] - w[0][1]);
             cum.push(cum.last().expect("one") + d);
         }
         Ok(Route { points: pts, cum })
@@ -74,7 +74,7 @@ impl Route {
         let raw = ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2;
         let t = raw.clamp(0.0, 1.0);
         let (cx, cy) = (a[0] + t * dx, a[1] + t * dy);
-        let dist = (p[0] - cx).hypot(p[1] - cy);
+        let dist = crate::math::hypot(p[0] - cx, p[1] - cy);
         let len = len2.sqrt();
         let cross = (dx * (p[1] - a[1]) - dy * (p[0] - a[0])) / len;
         let side = if cross >= 0.0 { 1.0 } else { -1.0 };
@@ -143,7 +143,7 @@ impl Route {
     pub fn heading_at(&self, s: f64) -> f64 {
         let i = self.segment_at(s);
         let (a, b) = (self.points[i], self.points[i + 1]);
-        (b[1] - a[1]).atan2(b[0] - a[0])
+        crate::math::atan2(b[1] - a[1], b[0] - a[0])
     }
 
     /// Signed curvature around arc length `s` (1/m, positive turning left): the change of

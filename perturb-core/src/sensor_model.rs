@@ -198,16 +198,16 @@ impl Axes {
     /// A heading (about the up axis, radians, in the canonical frame) as a heading about the
     /// sensor's +z axis.
     pub fn yaw_to_sensor(&self, yaw: f32) -> f32 {
-        let (s, c) = yaw.sin_cos();
+        let (s, c) = crate::math::sincosf(yaw);
         let d = self.to_sensor([c, s, 0.0]);
-        d[1].atan2(d[0])
+        crate::math::atan2f(d[1], d[0])
     }
 
     /// A heading about the sensor's +z axis as a heading in the canonical frame.
     pub fn yaw_to_canonical(&self, yaw: f32) -> f32 {
-        let (s, c) = yaw.sin_cos();
+        let (s, c) = crate::math::sincosf(yaw);
         let d = self.to_canonical([c, s, 0.0]);
-        d[1].atan2(d[0])
+        crate::math::atan2f(d[1], d[0])
     }
 }
 

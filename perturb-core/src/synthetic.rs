@@ -261,8 +261,8 @@ pub fn vlp32c_scan(n: u64) -> Cloud {
             let az = a as f32 * std::f32::consts::TAU / steps as f32;
             let mut pts = Vec::with_capacity(32);
             for (ring, elev) in VLP32C_ELEVATIONS.iter().enumerate() {
-                let (se, ce) = elev.to_radians().sin_cos();
-                let d = [ce * az.cos(), ce * az.sin(), se];
+                let (se, ce) = crate::math::sincosf(elev.to_radians());
+                let d = [ce * crate::math::cosf(az), ce * crate::math::sinf(az), se];
                 let mut best = f32::INFINITY;
                 let mut refl = 0.0;
                 for b in &obs {

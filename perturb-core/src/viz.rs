@@ -185,7 +185,10 @@ pub fn bird_eye_view(
         let steps = (r as f32 * scale * 6.3) as i32 + 8;
         for k in 0..steps {
             let a = k as f32 / steps as f32 * std::f32::consts::TAU;
-            let (u, v) = to_px(r as f32 * a.cos(), r as f32 * a.sin());
+            let (u, v) = to_px(
+                r as f32 * crate::math::cosf(a),
+                r as f32 * crate::math::sinf(a),
+            );
             put(&mut img, u, v, [45, 45, 45]);
         }
     }
@@ -207,7 +210,7 @@ pub fn bird_eye_view(
         put(&mut img, u, v, colormap(t));
     }
     for b in boxes {
-        let (s, co) = b.yaw.sin_cos();
+        let (s, co) = crate::math::sincosf(b.yaw);
         let (hl, hw) = (b.size[0] / 2.0, b.size[1] / 2.0);
         let corners: Vec<(i32, i32)> = [(hl, hw), (hl, -hw), (-hl, -hw), (-hl, hw)]
             .iter()

@@ -156,11 +156,11 @@ impl CameraPerturbation for Zigzag {
         for _ in 0..self.lines {
             let (x0, y0) = (rng.f32() * w, rng.f32() * h);
             let a = rng.f32() * std::f32::consts::TAU;
-            let (ux, uy) = (a.cos(), a.sin());
+            let (ux, uy) = (crate::math::cosf(a), crate::math::sinf(a));
             let max_steps = (2.0 * (w + h) / k.max(0.25)) as usize + 1;
             for step in 0..max_steps {
                 let t = step as f32 * k;
-                let off = self.amplitude * k * (self.freq * step as f32).sin();
+                let off = self.amplitude * k * crate::math::sinf(self.freq * step as f32);
                 let (x, y) = (x0 + ux * t - uy * off, y0 + uy * t + ux * off);
                 if x < 0.0 || y < 0.0 || x >= w || y >= h {
                     break;

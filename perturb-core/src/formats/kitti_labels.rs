@@ -227,11 +227,11 @@ impl KittiCalib {
         let [x, y, z] = o.location.map(|v| v as f64);
         let c = self.rect_to_velo([x, y - h / 2.0, z]);
         let ry = o.rotation_y as f64;
-        let d = self.rect_dir_to_velo([ry.cos(), 0.0, -ry.sin()]);
+        let d = self.rect_dir_to_velo([crate::math::cos(ry), 0.0, -crate::math::sin(ry)]);
         Box3 {
             center: c.map(|v| v as f32),
             size: [l as f32, w as f32, h as f32],
-            yaw: d[1].atan2(d[0]) as f32,
+            yaw: crate::math::atan2(d[1], d[0]) as f32,
         }
     }
 }

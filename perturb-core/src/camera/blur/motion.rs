@@ -12,7 +12,7 @@ pub const MOTION: [(usize, f64); 5] = [(2, 5.0), (4, 12.0), (6, 20.0), (10, 30.0
 /// The reference's motion kernel as a list of (row, column) taps of an n x n kernel: for each row y,
 /// column `int(tan(theta) (y - n/2) + n/2)` (truncated towards zero), kept inside the kernel.
 pub fn motion_taps(n: usize, theta_deg: f64) -> Vec<(usize, usize)> {
-    let t = theta_deg.to_radians().tan();
+    let t = crate::math::tan(theta_deg.to_radians());
     (0..n)
         .filter_map(|y| {
             let col = (t * (y as f64 - (n / 2) as f64) + (n / 2) as f64).trunc();

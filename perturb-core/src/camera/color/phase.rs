@@ -21,7 +21,8 @@ pub const PHASE_SCRAMBLE: [f32; 5] = [0.05, 0.15, 0.26, 0.38, 0.55];
 /// it against a direct DFT). The uniform draws are quantised to 4096 levels so that `cos` and `sin`
 /// come from a table built at configuration time (a phase step of at most 0.0004 rad). Frame sizes
 /// with large prime factors transform more slowly (rustfft chooses Rader / Bluestein); the FFT plans
-/// are built at configuration time, and the working buffers (about 8 bytes per pixel per colour
+/// are built at configuration time, with rustfft's scalar algorithms on every CPU (see
+/// [`FftPlan`]), and the working buffers (about 8 bytes per pixel per colour
 /// channel) are kept from frame to frame. A frame makes three passes over memory: the row
 /// transforms, the column transforms (a block of columns is gathered, transformed, scrambled and
 /// transformed back while it sits in the cache), and the inverse row transforms, which write the
@@ -73,6 +74,21 @@ const COLUMN_BLOCK: usize = 16;
 /// Rows per task of the row transforms.
 const ROW_BAND: usize = 16;
 
+/// The transforms of a frame, rustfft's scalar algorithms on every CPU: the same bytes on x86-64
+/// with and without AVX2 and on aarch64.
+///
+/// rustfft's planner, with the crate's default features, picks AVX, SSE or NEON algorithms at run
+/// time. They sum in other orders than the scalar ones (on a 1920x1208 frame 97-99.7 % of the
+/// bins differed in their last bits before rounding, enough to move output bytes), so this crate
+/// turns those features off (`Cargo.toml`) and plans the column transforms with
+/// `FftPlannerScalar`; realfft's planner builds its inner transform with rustfft's `FftPlanner`,
+/// which without the features has the scalar algorithms only (a test checks it plans what
+/// `FftPlannerScalar` plans). The scalar algorithms' arithmetic is plain Rust, which rustc never
+/// fuses or reorders; their twiddle factors are the C library's `cos` and `sin` in f64 rounded
+/// to f32, where libraries that differ by an ulp give the same f32 unless the exact value lies
+/// within an ulp of a rounding boundary of f32, about one twiddle in 10^8 (a test checks every
+/// twiddle of the common frame sizes is far from one). Against the SIMD planner on this
+/// project's x86-64 VM, a 1920x1208 frame costs about a third more time (docs/performance.md).
 struct FftPlan {
     w: usize,
     h: usize,
@@ -98,7 +114,7 @@ impl PhaseScrambling {
     fn new(seed: u64, w: usize, h: usize, s: f32) -> Self {
         let (w, h) = (w.max(1), h.max(1));
         let mut real = realfft::RealFftPlanner::<f32>::new();
-        let mut cplx = rustfft::FftPlanner::<f32>::new();
+        let mut cplx = rustfft::FftPlannerScalar::<f32>::new();
         let amp = s as f64 * std::f64::consts::PI;
         let levels = 1usize << PHASE_BITS;
         PhaseScrambling {
@@ -114,7 +130,7 @@ impl PhaseScrambling {
             trig: (0..levels)
                 .map(|i| {
                     let t = amp * (i as f64 + 0.5) / levels as f64;
-                    (t.cos() as f32, t.sin() as f32)
+                    (crate::math::cos(t) as f32, crate::math::sin(t) as f32)
                 })
                 .collect::<Vec<_>>()
                 .try_into()
@@ -427,6 +443,93 @@ mod tests {
                         "{w}x{h} ({xx},{y}): {got} vs {want}"
                     );
                 }
+            }
+        }
+    }
+
+    /// Frame sides the twiddle test covers: the common camera sizes (1920x1208 and 2064x1544
+    /// automotive, 1920x1080, 1280x720, 1242x375 and the other KITTI widths, 800x503, 640x480)
+    /// and the sizes of the output-hash test.
+    const SIDES: [usize; 30] = [
+        1920, 1208, 1080, 1280, 720, 2064, 1544, 1242, 375, 1224, 370, 1238, 374, 1241, 376, 800,
+        503, 640, 480, 3840, 2160, 641, 403, 203, 61, 67, 29, 45, 17, 401,
+    ];
+
+    /// The transform lengths whose twiddles rustfft (scalar planner) and realfft may compute for
+    /// a transform of length `n`, and more: every divisor (mixed radix, butterflies), `p - 1` for
+    /// every prime factor (Rader's inner transform), `2 p` and the power of two above it
+    /// (Bluestein's), recursively.
+    fn twiddle_lengths(n: usize, out: &mut std::collections::BTreeSet<usize>) {
+        if n == 0 || !out.insert(n) {
+            return;
+        }
+        for d in (1..n).filter(|d| n.is_multiple_of(*d)) {
+            twiddle_lengths(d, out);
+        }
+        let primes = (2..=n).filter(|p| n.is_multiple_of(*p) && (2..*p).all(|q| p % q != 0));
+        for p in primes.filter(|&p| p > 2) {
+            twiddle_lengths(p - 1, out);
+            twiddle_lengths(2 * p, out);
+            twiddle_lengths((2 * p - 1).next_power_of_two(), out);
+        }
+    }
+
+    /// Every twiddle factor rustfft and realfft compute for the lengths of [`SIDES`] (`cos` and
+    /// `sin` of `-2 pi i / n` in f64, rounded to f32) is the same f32 for any f64 within 2 ulp of
+    /// `libm`'s: so the C library of any machine (within an ulp of the exact value, as glibc's and
+    /// musl's are) gives these transforms the same twiddles, and the scalar algorithms the same
+    /// bytes.
+    #[test]
+    fn twiddles_of_common_frame_sizes_round_alike_in_every_c_library() {
+        let mut lengths = std::collections::BTreeSet::new();
+        for n in SIDES {
+            twiddle_lengths(n, &mut lengths);
+            twiddle_lengths(n / 2, &mut lengths);
+        }
+        let mut checked = 0usize;
+        for &n in &lengths {
+            let constant = -2f64 * std::f64::consts::PI / n as f64;
+            for i in 0..n {
+                let angle = constant * i as f64;
+                for v in [crate::math::cos(angle), crate::math::sin(angle)] {
+                    let lo = v.next_down().next_down() as f32;
+                    let hi = v.next_up().next_up() as f32;
+                    assert!(
+                        lo == hi,
+                        "twiddle {i} of {n}: {v:e} lies near an f32 boundary"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 100_000, "{checked} twiddles");
+    }
+
+    /// The planner realfft builds its transforms with (rustfft's `FftPlanner`) plans what
+    /// `FftPlannerScalar` plans, bit for bit on odd and prime lengths: a SIMD feature of rustfft
+    /// switched back on (by this crate or any other in the build) fails here on a CPU that has
+    /// the SIMD instructions.
+    #[test]
+    fn default_planner_gives_the_scalar_planners_bytes() {
+        for n in [5usize, 17, 61, 97, 151, 203, 375, 401, 1208, 1242] {
+            let x: Vec<Complex32> = (0..n)
+                .map(|i| Complex32::new(((i * 37) % 251) as f32, ((i * 11) % 7) as f32 - 3.0))
+                .collect();
+            let mut auto = rustfft::FftPlanner::<f32>::new();
+            let mut scalar = rustfft::FftPlannerScalar::<f32>::new();
+            for direction in [
+                rustfft::FftDirection::Forward,
+                rustfft::FftDirection::Inverse,
+            ] {
+                let [a, b] =
+                    [auto.plan_fft(n, direction), scalar.plan_fft(n, direction)].map(|plan| {
+                        let mut v = x.clone();
+                        plan.process(&mut v);
+                        v.iter()
+                            .flat_map(|c| [c.re.to_bits(), c.im.to_bits()])
+                            .collect::<Vec<_>>()
+                    });
+                assert_eq!(a, b, "length {n}, {direction:?}");
             }
         }
     }

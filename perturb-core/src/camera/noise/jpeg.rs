@@ -207,7 +207,8 @@ fn dct_matrix() -> Block {
             } else {
                 1.0
             };
-            *b = (c / 2.0 * ((2 * x + 1) as f64 * u as f64 * std::f64::consts::PI / 16.0).cos())
+            *b = (c / 2.0
+                * crate::math::cos((2 * x + 1) as f64 * u as f64 * std::f64::consts::PI / 16.0))
                 as f32;
         }
     }

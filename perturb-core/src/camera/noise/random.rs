@@ -162,7 +162,7 @@ fn poisson_quantile(mean: f64, p: f64) -> f64 {
     }
     // Sequential search of the CDF from 0; means are at most 120 here.
     let mut k = 0.0;
-    let mut pmf = (-mean).exp();
+    let mut pmf = crate::math::exp(-mean);
     let mut cdf = pmf;
     while cdf < p && k < 10_000.0 {
         k += 1.0;

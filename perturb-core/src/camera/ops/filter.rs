@@ -14,7 +14,7 @@ pub fn opencv_sigma(k: usize) -> f64 {
 pub fn gaussian_kernel(k: usize, sigma: f64) -> Vec<f32> {
     let r = (k / 2) as i64;
     let w: Vec<f64> = (-r..=r)
-        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+        .map(|i| crate::math::exp(-(i * i) as f64 / (2.0 * sigma * sigma)))
         .collect();
     let s: f64 = w.iter().sum();
     w.iter().map(|v| (v / s) as f32).collect()

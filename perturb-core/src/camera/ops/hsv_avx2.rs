@@ -24,7 +24,8 @@ use std::arch::x86_64::*;
 /// Bit `n` (word `n / 32`, bit `n % 32`) set where `round(2^32 / n) n >= 2^32`, for `n` in
 /// 1..=255: the fixed-point rounding of a quotient by `n` takes exact halves up there (the
 /// reciprocal is not below `2^32 / n`) and down elsewhere. Bit 0 is clear (no quotient by 0 is
-/// rounded).
+/// rounded). (Read by the AVX2 kernel, and by a test on every target.)
+#[cfg(any(target_arch = "x86_64", test))]
 pub(super) const TIES_UP: [u32; 8] = {
     let mut bits = [0u32; 8];
     let mut n = 1u64;

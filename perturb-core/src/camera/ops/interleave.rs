@@ -23,6 +23,7 @@ use std::arch::x86_64::*;
 /// `(k - i) mod 3` that holds channel `k` there (`[k][0]` marks piece 1, `[k][1]` piece 2), and
 /// the shuffle putting the chosen bytes in pixel order (pixel `p` is at `(3 p + k) mod 16`).
 /// Both halves of each vector repeat the 16 bytes.
+#[cfg(target_arch = "x86_64")]
 const LOAD: ([[[u8; 32]; 2]; 3], [[u8; 32]; 3]) = {
     let mut pick = [[[0u8; 32]; 2]; 3];
     let mut order = [[0u8; 32]; 3];
@@ -45,6 +46,7 @@ const LOAD: ([[[u8; 32]; 2]; 3], [[u8; 32]; 3]) = {
 /// Per piece `j`: the byte masks choosing, at each position `i`, channel `(i + j) mod 3`
 /// (`[j][0]` marks channel 1, `[j][1]` channel 2); per channel `k`: the shuffle putting pixel
 /// `p` at position `(3 p + k) mod 16`, the inverse of [`LOAD`]'s order.
+#[cfg(target_arch = "x86_64")]
 const STORE: ([[[u8; 32]; 2]; 3], [[u8; 32]; 3]) = {
     let mut pick = [[[0u8; 32]; 2]; 3];
     let mut spread = [[0u8; 32]; 3];

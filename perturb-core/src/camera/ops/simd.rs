@@ -1,14 +1,44 @@
-//! Runtime dispatch to an AVX2 copy of per-row kernels (`wide_fn!`), with a switch that forces
-//! the baseline copy for tests and benchmarks.
+//! Runtime dispatch to an AVX2 copy of per-row kernels (`wide_fn!`), with two switches that force
+//! the portable (baseline) copy: [`force_baseline`] for tests and benchmarks in one process, and
+//! the environment variable [`PORTABLE_VAR`] (`PERTURB_PORTABLE=1`) for a whole process tree.
 
-/// Whether the functions defined with `wide_fn!` run their AVX2 copy: on x86-64 CPUs that have
-/// AVX2, FMA, BMI1, BMI2 and LZCNT (the x86-64-v3 level, every x86-64 CPU since about 2015),
-/// unless [`force_baseline`] is on. The check is a few cached loads.
+/// The environment variable that makes every instruction-set dispatch of this library take its
+/// portable path, in every program built on it (`perturb`, `perturbd`, `perturb-bridge`, the
+/// Python package): `PERTURB_PORTABLE=1`. Read once, at the first dispatch; unset, empty or `0`
+/// leaves the choice to the CPU, any other value forces the portable path.
+///
+/// What it reaches: the `wide_fn!` kernels and the hand-written AVX2 kernels (all go through
+/// [`wide_available`]). The FFTs of phase scrambling (rustfft, realfft) have no choice to make:
+/// they are built with the scalar algorithms on every CPU (`camera/color/phase.rs` says why),
+/// and the float functions whose results differ between C libraries (`exp`, `ln`, `sin`, ...)
+/// come from the `libm` crate where they decide bytes, so the portable path and the default give
+/// the same bytes on x86-64 with and without AVX2 and on aarch64; the switch lets anyone check
+/// that on their own computer (README, "aarch64").
+pub const PORTABLE_VAR: &str = "PERTURB_PORTABLE";
+
+/// Whether [`PORTABLE_VAR`] asks for the portable path in this process (read once).
+pub fn portable_from_env() -> bool {
+    static PORTABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *PORTABLE.get_or_init(|| portable_value(std::env::var_os(PORTABLE_VAR).as_deref()))
+}
+
+/// [`PORTABLE_VAR`]'s meaning: unset, empty or `0` is off, anything else on.
+fn portable_value(v: Option<&std::ffi::OsStr>) -> bool {
+    v.is_some_and(|v| !v.is_empty() && v != "0")
+}
+
+/// Whether the functions defined with `wide_fn!` (and the hand-written AVX2 kernels) run their
+/// AVX2 copy: on x86-64 CPUs that have AVX2, FMA, BMI1, BMI2 and LZCNT (the x86-64-v3 level,
+/// every x86-64 CPU since about 2015), unless [`force_baseline`] is on or [`PORTABLE_VAR`] is set.
+/// Always false on other architectures (aarch64 runs the baseline copy, compiled there for NEON:
+/// docs/performance.md, "aarch64", says why no NEON copy was written). The check is a few cached
+/// loads.
 #[inline]
 pub fn wide_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         !BASELINE_ONLY.load(std::sync::atomic::Ordering::Relaxed)
+            && !portable_from_env()
             && std::arch::is_x86_feature_detected!("avx2")
             && std::arch::is_x86_feature_detected!("fma")
             && std::arch::is_x86_feature_detected!("bmi1")
@@ -25,7 +55,8 @@ pub fn wide_available() -> bool {
 static BASELINE_ONLY: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
 /// Makes the `wide_fn!` functions run their baseline copy only (`true`) or the widest the CPU
-/// has (`false`, the default), on every thread: for tests and benchmarks that compare the two.
+/// has (`false`, the default, unless [`PORTABLE_VAR`] is set), on every thread: for tests and
+/// benchmarks that compare the two.
 pub fn force_baseline(on: bool) {
     BASELINE_ONLY.store(on, std::sync::atomic::Ordering::Relaxed);
 }
@@ -72,3 +103,19 @@ macro_rules! wide_fn {
     };
 }
 pub(crate) use wide_fn;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn portable_variable_is_off_only_when_unset_empty_or_zero() {
+        use std::ffi::OsStr;
+        assert!(!portable_value(None));
+        assert!(!portable_value(Some(OsStr::new(""))));
+        assert!(!portable_value(Some(OsStr::new("0"))));
+        for on in ["1", "yes", "true"] {
+            assert!(portable_value(Some(OsStr::new(on))), "{on}");
+        }
+    }
+}

@@ -289,6 +289,7 @@ pub(super) fn channel_byte_sums<const C: usize>(src: &[u8]) -> ([u64; 4], usize)
 
 /// `masks[j][k]`: 0xff where byte `i` of block `j` (byte `32 j + i` of a run of pixels of `C`
 /// bytes) is channel `k`, 0 elsewhere.
+#[cfg(target_arch = "x86_64")]
 const fn channel_masks<const C: usize>() -> [[[u8; 32]; 3]; C] {
     let mut masks = [[[0u8; 32]; 3]; C];
     let mut i = 0;
