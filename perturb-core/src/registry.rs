@@ -153,6 +153,50 @@ pub fn of_modality(m: Modality) -> impl Iterator<Item = &'static Entry> {
     CATALOGUE.iter().filter(move |e| e.modality == m)
 }
 
+/// What a perturbation does to the camera model that a stream's `camera_info` describes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Calibration {
+    /// Every pixel stays where it was: the forwarded calibration describes the output exactly
+    /// (every LiDAR perturbation too: `camera_info` belongs to cameras).
+    Kept,
+    /// Pixels move by a bounded amount or part of the image is another view of the scene; the
+    /// note says how far the forwarded calibration still holds.
+    Approximate(&'static str),
+}
+
+/// The camera perturbations that move pixels. No camera perturbation changes the image's size,
+/// its principal point or its focal length, so the bridge forwards `camera_info` unchanged.
+const MOVES_PIXELS: &[(&str, &str)] = &[
+    (
+        "C-B2",
+        "each pixel taken from a random neighbour up to 2, 5, 6, 9, 12 px away (s1-s5): the calibration holds to that error",
+    ),
+    (
+        "C-B4",
+        "an average of copies zoomed about the image centre by up to 1.0, 1.10, 1.14, 1.20, 1.30x (s1-s5): the centre holds, edges smear radially",
+    ),
+    (
+        "C-D1",
+        "each pixel displaced by a smoothed field of at most 2, 3, 5, 7, 10 px (s1-s5): the calibration holds to that error",
+    ),
+    (
+        "C-D3",
+        "a 2x enlargement of a random quarter blended in with weight 0.1-0.9 (s1-s5): that ghost image is not described by the calibration, the frame itself is",
+    ),
+];
+
+impl Entry {
+    /// Whether the forwarded `camera_info` still describes this perturbation's output.
+    pub fn calibration(&self) -> Calibration {
+        MOVES_PIXELS
+            .iter()
+            .find(|(id, _)| *id == self.id)
+            .map_or(Calibration::Kept, |(_, note)| {
+                Calibration::Approximate(note)
+            })
+    }
+}
+
 macro_rules! entry {
     ($id:literal, $name:literal, $m:ident, $family:literal, $build:expr, $reference:literal, $desc:literal) => {
         Entry {
@@ -283,6 +327,17 @@ mod tests {
                 _ => {}
             }
         }
+    }
+
+    #[test]
+    fn calibration_notes_name_camera_entries_only() {
+        for (id, note) in MOVES_PIXELS {
+            let e = find(id).unwrap();
+            assert_eq!(e.modality, Modality::Camera, "{id}");
+            assert_eq!(e.calibration(), Calibration::Approximate(note));
+        }
+        assert_eq!(find("C-A1").unwrap().calibration(), Calibration::Kept);
+        assert_eq!(find("L-F4").unwrap().calibration(), Calibration::Kept);
     }
 
     #[test]

@@ -1,11 +1,12 @@
 //! `perturb list`.
 
-use perturb_core::registry::{CATALOGUE, Modality};
+use perturb_core::registry::{CATALOGUE, Calibration, Modality};
 
 /// Arguments of `perturb list`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Print a JSON array (id, name, modality, family, severities, description, reference).
+    /// Print a JSON array (id, name, modality, family, severities, description, reference,
+    /// calibration: how far a forwarded camera_info still holds, null when exactly).
     #[arg(long)]
     json: bool,
     /// Only this modality: camera or lidar.
@@ -22,6 +23,8 @@ struct Row {
     severities: Vec<u8>,
     description: &'static str,
     reference: &'static str,
+    /// How far the forwarded `camera_info` still describes the output; `None`: exactly.
+    calibration: Option<&'static str>,
 }
 
 /// Prints the catalogue.
@@ -37,6 +40,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             severities: e.severities().collect(),
             description: e.description,
             reference: e.reference,
+            calibration: match e.calibration() {
+                Calibration::Kept => None,
+                Calibration::Approximate(note) => Some(note),
+            },
         })
         .collect();
     if args.json {
@@ -58,6 +65,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             sev,
             r.description
         );
+    }
+    let moved: Vec<&Row> = rows.iter().filter(|r| r.calibration.is_some()).collect();
+    if !moved.is_empty() {
+        println!(
+            "\ncamera_info is forwarded unchanged: it describes every output exactly but these:"
+        );
+        for r in moved {
+            println!("  {}: {}", r.id, r.calibration.unwrap_or_default());
+        }
     }
     Ok(())
 }

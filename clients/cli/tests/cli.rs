@@ -47,7 +47,14 @@ fn list_json_is_the_whole_catalogue() {
         let n = e["severities"].as_array().unwrap().len();
         assert_eq!(n, if e["modality"] == "camera" { 5 } else { 3 });
     }
+    let approximate: Vec<&str> = arr
+        .iter()
+        .filter(|e| !e["calibration"].is_null())
+        .map(|e| e["id"].as_str().unwrap())
+        .collect();
+    assert_eq!(approximate, ["C-B2", "C-B4", "C-D1", "C-D3"]);
     assert!(ok(&["list", "--modality", "lidar"]).contains("L-B6"));
+    assert!(ok(&["list"]).contains("C-D3: a 2x enlargement"));
 }
 
 #[test]
