@@ -414,8 +414,8 @@ pub struct RecordSection {
     /// Bag format: `mcap` (rosbag2 MCAP, the default) or `bag1` (a ROS 1 `.bag` file).
     #[serde(default)]
     pub format: Option<String>,
-    /// Chunk compression: for `mcap` zstd (default), lz4, none; for `bag1` none (default), bz2,
-    /// lz4.
+    /// Chunk compression: for `mcap` zstd (default), `zstd:LEVEL` (1..=19), lz4, none; for
+    /// `bag1` none (default), bz2, lz4.
     #[serde(default)]
     pub compression: Option<String>,
     /// Stop after this many perturbed (or, when only raw is recorded, raw) frames per stream.

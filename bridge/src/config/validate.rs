@@ -217,15 +217,8 @@ impl Config {
             None => perturb_bag::BagFormat::default(),
         };
         if let Some(c) = &r.compression {
-            match format {
-                perturb_bag::BagFormat::Rosbag2 => {
-                    c.parse::<perturb_bag::Compression>().map(|_| ())
-                }
-                perturb_bag::BagFormat::Ros1 => {
-                    c.parse::<perturb_bag::ros1::Ros1Compression>().map(|_| ())
-                }
-            }
-            .map_err(|e| ("record.compression".to_string(), e))?;
+            perturb_bag::check_compression(format, c)
+                .map_err(|e| ("record.compression".to_string(), e))?;
         }
         Ok(())
     }
