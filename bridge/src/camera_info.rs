@@ -51,6 +51,8 @@ pub fn stamp_of(data: &[u8], wire: Wire) -> Option<(i32, u32)> {
 #[derive(Debug, Default)]
 pub struct CameraInfoLink {
     waiting: Mutex<VecDeque<Calibration>>,
+    /// The last one received (the live view shows it beside the stream's frames).
+    latest: Mutex<Option<Calibration>>,
 }
 
 /// How many camera_info messages wait for their image before the oldest goes out anyway.
@@ -61,10 +63,19 @@ const WAIT_TIME: std::time::Duration = std::time::Duration::from_millis(500);
 impl CameraInfoLink {
     /// The ingress side: a camera_info arrived.
     pub fn push(&self, c: Calibration) {
+        *self.latest.lock().unwrap_or_else(|p| p.into_inner()) = Some(c.clone());
         self.waiting
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .push_back(c);
+    }
+
+    /// The last camera_info received, if any.
+    pub fn latest(&self) -> Option<Calibration> {
+        self.latest
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
     }
 
     /// The egress side: the camera_info messages to publish now that the last image out was

@@ -40,6 +40,8 @@ pub enum EventsMode {
 pub struct EventsHub {
     tx: Sender<EventRecord>,
     dropped: AtomicU64,
+    /// The live view's copy of every record ([`EventsHub::tap`]), when the view runs.
+    view: std::sync::OnceLock<Sender<EventRecord>>,
 }
 
 /// Records the hub holds before it drops new ones.
@@ -53,13 +55,24 @@ impl EventsHub {
             Arc::new(EventsHub {
                 tx,
                 dropped: AtomicU64::new(0),
+                view: std::sync::OnceLock::new(),
             }),
             rx,
         )
     }
 
+    /// A second receiver of every record, for the live view (its own queue: a full one drops
+    /// the view's copy only). The first call makes it; later calls get `None`.
+    pub fn tap(&self) -> Option<Receiver<EventRecord>> {
+        let (tx, rx) = bounded(QUEUE);
+        self.view.set(tx).ok().map(|()| rx)
+    }
+
     /// Hands a record over without waiting (a full queue drops it, counted).
     pub fn send(&self, r: EventRecord) {
+        if let Some(v) = self.view.get() {
+            let _ = v.try_send(r.clone());
+        }
         if self.tx.try_send(r).is_err() {
             self.dropped.fetch_add(1, Ordering::Relaxed);
         }

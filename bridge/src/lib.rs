@@ -31,3 +31,4 @@ pub mod run;
 pub mod stats;
 pub mod synthetic;
 pub mod topic;
+pub mod view;

@@ -118,6 +118,10 @@ struct RecordArgs {
     /// Bus.
     #[arg(long, default_value = "iceoryx2")]
     bus: String,
+    /// Chunk compression: for mcap zstd (the default), zstd:LEVEL (1..19), lz4 or none; for
+    /// bag1 none (the default), bz2 or lz4.
+    #[arg(long)]
+    compression: Option<String>,
 }
 
 /// The arguments of `perturb-bridge synthetic`.
@@ -271,6 +275,7 @@ fn record_config(a: &RecordArgs, cfg: &mut Config) -> Result<()> {
         max_frames,
         seconds,
         bus,
+        compression,
     } = a;
     cfg.bridge.bus = bus_kind(bus)?;
     let mut names = Vec::new();
@@ -292,7 +297,7 @@ fn record_config(a: &RecordArgs, cfg: &mut Config) -> Result<()> {
         raw: !perturbed_only,
         perturbed: !raw_only,
         format: Some(format.clone()),
-        compression: None,
+        compression: compression.clone(),
         max_frames: *max_frames,
         seconds: *seconds,
     });

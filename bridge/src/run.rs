@@ -96,6 +96,9 @@ pub fn resolve(cfg: &Config) -> Result<Resolved> {
             }
         }
     }
+    if let Some(v) = &cfg.view {
+        crate::view::streams(v, &kinds)?;
+    }
     Ok(Resolved { replay, kinds })
 }
 
@@ -138,6 +141,8 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
         }
         None => None,
     };
+    // The live view reads every events record too (a hub of its own without [events]).
+    let (events, view_events) = crate::view::tap_events(cfg.view.is_some(), events);
     if let (Some(k), Some(transport)) = (&cfg.kill, cfg.kill_transport()) {
         sinks.push(Box::new(KillWatch {
             topic: k.topic.clone(),
@@ -222,6 +227,9 @@ pub fn plan(cfg: &Config) -> Result<Plan> {
             cfg: r.clone(),
             kinds: kinds.clone(),
         }));
+    }
+    if let Some(v) = crate::view::View::new(cfg, &kinds, &calibrations, view_events, events)? {
+        sinks.push(Box::new(v));
     }
     Ok(Plan {
         sinks,

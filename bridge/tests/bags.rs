@@ -132,6 +132,7 @@ fn image_bag(dir: &Path, n: u32) -> Vec<u8> {
     let opts = WriterOptions {
         compression: perturb_bag::Compression::None,
         chunk_size: 4096,
+        ..Default::default()
     };
     let mut w = BagWriter::create(dir, &opts).unwrap();
     let ch = w.add_topic("/cam", "sensor_msgs/msg/Image").unwrap();
@@ -207,6 +208,7 @@ fn a_looping_replay_of_a_one_instant_bag_does_not_flood_the_log() {
         &WriterOptions {
             compression: perturb_bag::Compression::None,
             chunk_size: 4096,
+            ..Default::default()
         },
     )
     .unwrap();

@@ -63,6 +63,12 @@
 //! raw = true
 //! perturbed = true
 //!
+//! [view]                      # live view: Foxglove WebSocket server (docs/live-view.md)
+//! bind = "127.0.0.1"          # another address needs allow_remote = true
+//! port = 8765
+//! rate_hz = 10.0              # camera frames per second and side; clouds: cloud_rate_hz
+//! downscale = 2               # camera frames shrunk by this factor before JPEG
+//!
 //! [[synthetic.camera]]        # street scene -> <stream>/raw
 //! stream = "camera_front"
 //! width = 1920
@@ -414,8 +420,8 @@ pub struct RecordSection {
     /// Bag format: `mcap` (rosbag2 MCAP, the default) or `bag1` (a ROS 1 `.bag` file).
     #[serde(default)]
     pub format: Option<String>,
-    /// Chunk compression: for `mcap` zstd (default), lz4, none; for `bag1` none (default), bz2,
-    /// lz4.
+    /// Chunk compression: for `mcap` zstd (default), `zstd:LEVEL` (1..=19), lz4, none; for
+    /// `bag1` none (default), bz2, lz4.
     #[serde(default)]
     pub compression: Option<String>,
     /// Stop after this many perturbed (or, when only raw is recorded, raw) frames per stream.
@@ -552,6 +558,64 @@ pub struct Config {
     pub kill: Option<KillSection>,
     /// `[pose]`: the vehicle's position, for the daemon's campaign.
     pub pose: Option<PoseSection>,
+    /// `[view]`: the live view (Foxglove WebSocket server).
+    pub view: Option<ViewSection>,
+}
+
+/// `[view]`: the live view, a Foxglove WebSocket server in the bridge showing each stream raw
+/// beside perturbed, the events, the statistics, with the daemon's controls (`docs/live-view.md`).
+/// Off unless the section is there.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ViewSection {
+    /// The address the server listens on: a loopback address unless `allow_remote`.
+    pub bind: String,
+    /// The TCP port (0: any free port, logged).
+    pub port: u16,
+    /// Serve on an address other viewers than this computer's can reach (the view shows the
+    /// cameras and can switch perturbations and the kill switch).
+    pub allow_remote: bool,
+    /// The streams shown (default: every stream this bridge knows the kind of).
+    pub streams: Vec<String>,
+    /// Camera frames per second and side sent to viewers (the others are skipped).
+    pub rate_hz: f64,
+    /// Point clouds per second and side sent to viewers.
+    pub cloud_rate_hz: f64,
+    /// Camera frames are shrunk by this whole factor before JPEG encoding (1: full size).
+    pub downscale: u32,
+    /// JPEG quality, 1..=100.
+    pub jpeg_quality: u8,
+    /// Clouds are thinned (every k-th point) to at most this many points.
+    pub max_points: u32,
+    /// Seconds between two statistics messages of a stream (and two daemon status queries).
+    pub stats_interval_s: f64,
+    /// Offer the daemon's controls (set, off, kill, arm, status) as services.
+    pub control: bool,
+    /// The daemon's control service.
+    pub control_service: String,
+    /// Messages queued for one viewer before the oldest are dropped (a slow viewer loses view
+    /// messages, never the pipeline's frames).
+    pub backlog: usize,
+}
+
+impl Default for ViewSection {
+    fn default() -> Self {
+        ViewSection {
+            bind: "127.0.0.1".into(),
+            port: 8765,
+            allow_remote: false,
+            streams: Vec::new(),
+            rate_hz: 10.0,
+            cloud_rate_hz: 5.0,
+            downscale: 2,
+            jpeg_quality: 75,
+            max_points: 150_000,
+            stats_interval_s: 1.0,
+            control: true,
+            control_service: control_service(),
+            backlog: 64,
+        }
+    }
 }
 
 /// A configuration error: the file, the key and the problem.
@@ -848,6 +912,49 @@ streams = ["camera_front", "lidar_top"]
         ))
         .unwrap_err();
         assert_eq!(e.key, "pose.field");
+    }
+
+    /// `[view]`: loopback unless `allow_remote`, keys named in every refusal.
+    #[test]
+    fn view_binds_to_loopback_unless_remote_is_allowed() {
+        let cam = "[[synthetic.camera]]\nstream = \"c\"\n";
+        let c = parse(&format!("{cam}[view]\n")).unwrap();
+        let v = c.view.unwrap();
+        assert_eq!(
+            (v.bind.as_str(), v.port, v.downscale),
+            ("127.0.0.1", 8765, 2)
+        );
+        for ok in ["::1", "localhost", "127.0.0.2"] {
+            assert!(
+                parse(&format!("{cam}[view]\nbind = \"{ok}\"\n")).is_ok(),
+                "{ok}"
+            );
+        }
+        let e = parse(&format!("{cam}[view]\nbind = \"0.0.0.0\"\n")).unwrap_err();
+        assert_eq!(e.key, "view.bind");
+        assert!(e.problem.contains("allow_remote = true"), "{e}");
+        assert!(
+            parse(&format!(
+                "{cam}[view]\nbind = \"0.0.0.0\"\nallow_remote = true\n"
+            ))
+            .is_ok()
+        );
+        let e = parse(&format!("{cam}[view]\nbind = \"my-laptop\"\n")).unwrap_err();
+        assert_eq!(e.key, "view.bind");
+        for (key, bad) in [
+            ("rate_hz", "0"),
+            ("downscale", "0"),
+            ("jpeg_quality", "101"),
+            ("stats_interval_s", "0"),
+            ("backlog", "0"),
+        ] {
+            let e = parse(&format!("{cam}[view]\n{key} = {bad}\n")).unwrap_err();
+            assert_eq!(e.key, format!("view.{key}"), "{e}");
+        }
+        let e = parse(&format!("{cam}[view]\nstreams = [\"c\", \"c\"]\n")).unwrap_err();
+        assert_eq!(e.key, "view.streams[1]");
+        // A view alone (streams fed by another process) is a bridge of its own.
+        assert!(parse("[streams]\nc = \"image\"\n[view]\n").is_ok());
     }
 
     /// A 16384x16384 synthetic camera pre-rendered 24 GB before it published anything (and

@@ -37,6 +37,7 @@ impl Config {
         self.check_events(&ingress_topics, &egress_topics)?;
         self.check_kill()?;
         self.check_pose()?;
+        self.check_view()?;
         self.check_ros1(&egress_topics)?;
         self.check_not_empty()
     }
@@ -217,15 +218,8 @@ impl Config {
             None => perturb_bag::BagFormat::default(),
         };
         if let Some(c) = &r.compression {
-            match format {
-                perturb_bag::BagFormat::Rosbag2 => {
-                    c.parse::<perturb_bag::Compression>().map(|_| ())
-                }
-                perturb_bag::BagFormat::Ros1 => {
-                    c.parse::<perturb_bag::ros1::Ros1Compression>().map(|_| ())
-                }
-            }
-            .map_err(|e| ("record.compression".to_string(), e))?;
+            perturb_bag::check_compression(format, c)
+                .map_err(|e| ("record.compression".to_string(), e))?;
         }
         Ok(())
     }
@@ -448,6 +442,73 @@ impl Config {
         Ok(())
     }
 
+    /// `[view]`: a loopback address unless `allow_remote`, the rates, sizes and streams.
+    fn check_view(&self) -> Result<(), Problem> {
+        let Some(v) = &self.view else {
+            return Ok(());
+        };
+        let ip = if v.bind == "localhost" {
+            std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST)
+        } else {
+            v.bind.parse::<std::net::IpAddr>().map_err(|_| {
+                (
+                    "view.bind".to_string(),
+                    format!("`{}` is not an IP address (e.g. 127.0.0.1, ::1)", v.bind),
+                )
+            })?
+        };
+        if !ip.is_loopback() && !v.allow_remote {
+            return Err((
+                "view.bind".into(),
+                format!(
+                    "`{}` is not a loopback address: whoever reaches it sees the cameras and can                      switch perturbations and the kill switch; bind 127.0.0.1 (and tunnel, e.g.                      ssh -L 8765:127.0.0.1:8765), or set `view.allow_remote = true` to serve it anyway",
+                    v.bind
+                ),
+            ));
+        }
+        let rate = |key: &str, r: f64| {
+            if r.is_finite() && r > 0.0 && r <= 60.0 {
+                Ok(())
+            } else {
+                Err((
+                    format!("view.{key}"),
+                    format!("{r} must be in (0, 60] per second"),
+                ))
+            }
+        };
+        rate("rate_hz", v.rate_hz)?;
+        rate("cloud_rate_hz", v.cloud_rate_hz)?;
+        let whole = |key: &str, n: u64, lo: u64, hi: u64| {
+            if (lo..=hi).contains(&n) {
+                Ok(())
+            } else {
+                Err((format!("view.{key}"), format!("{n} must be in {lo}..={hi}")))
+            }
+        };
+        whole("downscale", u64::from(v.downscale), 1, 16)?;
+        whole("jpeg_quality", u64::from(v.jpeg_quality), 1, 100)?;
+        whole("max_points", u64::from(v.max_points), 1, 10_000_000)?;
+        whole("backlog", v.backlog as u64, 1, 100_000)?;
+        let t = v.stats_interval_s;
+        if !(t.is_finite() && (0.1..=60.0).contains(&t)) {
+            return Err((
+                "view.stats_interval_s".into(),
+                format!("{t} must be in [0.1, 60] seconds"),
+            ));
+        }
+        let mut seen = BTreeSet::new();
+        for (i, st) in v.streams.iter().enumerate() {
+            check_stream(format!("view.streams[{i}]"), st)?;
+            if !seen.insert(st) {
+                return Err((
+                    format!("view.streams[{i}]"),
+                    format!("stream `{st}` is listed twice"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// At least one adapter.
     fn check_not_empty(&self) -> Result<(), Problem> {
         let anything = !self.ingress.is_empty()
@@ -457,7 +518,8 @@ impl Config {
             || !self.synthetic.camera.is_empty()
             || !self.synthetic.lidar.is_empty()
             || self.kill.is_some()
-            || self.pose.is_some();
+            || self.pose.is_some()
+            || self.view.is_some();
         if !anything {
             return Err((
                 "(file)".into(),

@@ -39,7 +39,7 @@ pub use message::{
 };
 pub use read::Bag;
 pub use write::{BagWriter, Compression, WriterOptions};
-pub use writer::{AnyWriter, BagFormat};
+pub use writer::{AnyWriter, BagFormat, check_compression};
 
 use std::path::PathBuf;
 

@@ -31,11 +31,43 @@ impl std::str::FromStr for Compression {
     }
 }
 
+/// The highest zstd level a bag may be written with (zstd's own range is 1..=22; 20 and up need
+/// far more memory for little gain on camera frames).
+pub const MAX_ZSTD_LEVEL: u32 = 19;
+
+impl Compression {
+    /// Parses a compression as command lines and configurations name it: `none`, `lz4`, `zstd`
+    /// (zstd's default level, 3) or `zstd:LEVEL` (1..=19); returns it with its level (0: the
+    /// codec's default).
+    pub fn parse_spec(s: &str) -> Result<(Compression, u32), String> {
+        match s.split_once(':') {
+            None => Ok((s.parse()?, 0)),
+            Some(("zstd", level)) => {
+                let l = level
+                    .parse::<u32>()
+                    .ok()
+                    .filter(|l| (1..=MAX_ZSTD_LEVEL).contains(l))
+                    .ok_or_else(|| {
+                        format!(
+                            "zstd level `{level}` must be a whole number in 1..={MAX_ZSTD_LEVEL}"
+                        )
+                    })?;
+                Ok((Compression::Zstd, l))
+            }
+            Some((name, _)) => Err(format!(
+                "compression `{s}`: only zstd takes a level (zstd:1 .. zstd:{MAX_ZSTD_LEVEL}), `{name}` does not"
+            )),
+        }
+    }
+}
+
 /// Options of a [`BagWriter`].
 #[derive(Clone, Debug)]
 pub struct WriterOptions {
     /// Chunk compression.
     pub compression: Compression,
+    /// Compression level: zstd 1..=19; 0 is the codec's default (zstd 3, lz4's fast mode).
+    pub level: u32,
     /// Chunk size in bytes before compression.
     pub chunk_size: u64,
 }
@@ -44,6 +76,7 @@ impl Default for WriterOptions {
     fn default() -> Self {
         WriterOptions {
             compression: Compression::Zstd,
+            level: 0,
             chunk_size: 4 << 20,
         }
     }
@@ -121,6 +154,7 @@ impl BagWriter {
             .profile("ros2")
             .library(concat!("perturb-bag ", env!("CARGO_PKG_VERSION")))
             .compression(compression)
+            .compression_level(opts.level)
             .chunk_size(Some(opts.chunk_size))
             .create(BufWriter::with_capacity(1 << 20, file))
             .map_err(|e| werr(e.to_string()))?;

@@ -47,6 +47,16 @@ impl std::str::FromStr for BagFormat {
     }
 }
 
+/// Checks a chunk compression as [`AnyWriter::create`] takes it for `format`: for rosbag2
+/// `none`, `lz4`, `zstd` or `zstd:LEVEL` (1..=19); for ROS 1 `none`, `bz2` or `lz4`. The error
+/// says what is wrong and what is known.
+pub fn check_compression(format: BagFormat, spec: &str) -> Result<(), String> {
+    match format {
+        BagFormat::Rosbag2 => Compression::parse_spec(spec).map(|_| ()),
+        BagFormat::Ros1 => spec.parse::<Ros1Compression>().map(|_| ()),
+    }
+}
+
 /// A bag being written, in either format.
 #[derive(Debug)]
 pub enum AnyWriter {
@@ -57,8 +67,8 @@ pub enum AnyWriter {
 }
 
 impl AnyWriter {
-    /// Creates a bag at `path` with chunk `compression` (rosbag2: none, zstd, lz4, default zstd;
-    /// ROS 1: none, bz2, lz4, default none). A rosbag2 bag is a directory; a ROS 1 bag is the
+    /// Creates a bag at `path` with chunk `compression` (rosbag2: none, zstd, zstd:LEVEL with
+    /// LEVEL 1..=19, lz4, default zstd; ROS 1: none, bz2, lz4, default none). A rosbag2 bag is a directory; a ROS 1 bag is the
     /// file `path` when it ends in `.bag`, else the file `NAME.bag` in the new directory `path`
     /// (as rosbag2 puts `NAME_0.mcap` in its directory), which [`crate::Bag::open`] also opens.
     pub fn create(
@@ -72,14 +82,15 @@ impl AnyWriter {
         };
         Ok(match format {
             BagFormat::Rosbag2 => {
-                let compression = match compression {
-                    Some(c) => c.parse::<Compression>().map_err(bad)?,
-                    None => Compression::Zstd,
+                let (compression, level) = match compression {
+                    Some(c) => Compression::parse_spec(c).map_err(bad)?,
+                    None => (Compression::Zstd, 0),
                 };
                 AnyWriter::Rosbag2(Box::new(BagWriter::create(
                     path,
                     &WriterOptions {
                         compression,
+                        level,
                         ..Default::default()
                     },
                 )?))

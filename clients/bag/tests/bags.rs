@@ -81,6 +81,7 @@ fn write_sample(dir: &std::path::Path, compression: Compression) -> (Vec<Vec<u8>
         &WriterOptions {
             compression,
             chunk_size: 64 << 10,
+            ..Default::default()
         },
     )
     .unwrap();

@@ -56,6 +56,10 @@ pub struct Args {
     /// (default 16; 12 for a 12-bit sensor stored in 16-bit containers).
     #[arg(long, value_parser = clap::value_parser!(u8).range(9..=16))]
     bit_depth: Option<u8>,
+    /// For bags: chunk compression of the output; rosbag2 zstd (the default), zstd:LEVEL
+    /// (1..19), lz4 or none; ROS 1 none (the default), bz2 or lz4.
+    #[arg(long)]
+    compression: Option<String>,
     /// Input: .png .jpg .bin (KITTI) .pcd.bin (nuScenes) .pcd, a rosbag2 .mcap file or directory, or a ROS 1 .bag.
     input: PathBuf,
     /// Output file (same format as the input), or for a bag the output bag directory.
@@ -140,6 +144,7 @@ fn apply_bag(a: &Args, spec: Spec) -> Result<()> {
         sensor,
         topics: a.topic.clone(),
         bit_depth: a.bit_depth,
+        compression: a.compression.clone(),
     };
     perturb_study::perturb_bag::perturb_bag_with(
         &bag,

@@ -74,6 +74,10 @@ pub struct Args {
     /// goes to shard k mod COUNT, so COUNT machines that each run one shard write every set once.
     #[arg(long, value_name = "INDEX/COUNT")]
     pub shard: Option<perturb_study::batch::Shard>,
+    /// Bags: chunk compression of the output bags; rosbag2 zstd (the default), zstd:LEVEL
+    /// (1..19), lz4 or none; ROS 1 none (the default), bz2 or lz4.
+    #[arg(long)]
+    pub compression: Option<String>,
 }
 
 /// Runs `perturb batch`.
@@ -94,6 +98,7 @@ pub fn run(a: Args) -> Result<()> {
         topics: a.topic,
         lidar_metrics: a.lidar_metrics,
         shard: a.shard,
+        compression: a.compression,
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))

@@ -602,6 +602,7 @@ fn a_bag_with_a_4_gib_string_length_is_reported_under_a_memory_limit() {
         &WriterOptions {
             compression: Compression::Zstd,
             chunk_size: 64 << 10,
+            ..Default::default()
         },
     )
     .unwrap();

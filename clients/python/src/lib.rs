@@ -828,6 +828,7 @@ fn plan_batch<'py>(
             .map(|s| s.parse::<Shard>())
             .transpose()
             .map_err(perr)?,
+        compression: None,
     };
     if let Ok(Dataset::Bag(_)) = Dataset::open(&input) {
         return Err(perr(format!(

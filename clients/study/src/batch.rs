@@ -140,6 +140,8 @@ pub struct BatchOptions {
     pub lidar_metrics: bool,
     /// Only this share of the sets (to spread a batch over machines without a cluster engine).
     pub shard: Option<Shard>,
+    /// Bags: chunk compression of the output bags (see [`perturb_bag::AnyWriter::create`]).
+    pub compression: Option<String>,
 }
 
 /// Share `index` of `count` of a batch's sets: set k (in catalogue order, severities ascending)
@@ -351,13 +353,18 @@ pub fn run(opts: &BatchOptions, progress: &dyn Progress) -> Result<BatchOutcome>
                     std::fs::create_dir_all(parent).map_err(StudyError::io(parent))?;
                 }
                 let spec = Spec::new(set.entry.id, set.severity, opts.seed)?;
-                let n = crate::perturb_bag::perturb_bag(
+                let options = crate::perturb_bag::BagOptions {
+                    seq_offset: 0,
+                    sensor: sensor.clone(),
+                    topics: opts.topics.clone(),
+                    bit_depth: None,
+                    compression: opts.compression.clone(),
+                };
+                let n = crate::perturb_bag::perturb_bag_with(
                     &bag,
                     &dir,
                     spec,
-                    0,
-                    &sensor,
-                    &opts.topics,
+                    &options,
                     &Ticks(progress),
                 )?;
                 let done = dir.join(".done");

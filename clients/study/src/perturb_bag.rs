@@ -36,6 +36,7 @@ pub fn perturb_bag(
         sensor: sensor.clone(),
         topics: topics.to_vec(),
         bit_depth: None,
+        compression: None,
     };
     perturb_bag_with(bag, out, spec, &options, progress)
 }
@@ -51,6 +52,9 @@ pub struct BagOptions {
     pub topics: Vec<String>,
     /// Significant bits of 16-bit image samples (`mono16`, `bayer_*16`, ...; default 16).
     pub bit_depth: Option<u8>,
+    /// Chunk compression of the output (see [`perturb_bag::AnyWriter::create`]; default zstd
+    /// for rosbag2, none for ROS 1).
+    pub compression: Option<String>,
 }
 
 /// [`perturb_bag`] with every option. Images in any encoding of the encoding table
@@ -68,8 +72,9 @@ pub fn perturb_bag_with(
         ref sensor,
         ref topics,
         bit_depth,
+        ref compression,
     } = *options;
-    let (mut w, format, channel, events) = open_output(bag, out)?;
+    let (mut w, format, channel, events) = open_output(bag, out, compression.as_deref())?;
     let mut camera = match spec.entry.modality {
         Modality::Camera => Some(CameraJob {
             perturber: CameraPerturber::from_spec(spec)?,
@@ -138,14 +143,18 @@ pub fn perturb_bag_with(
 
 /// The output bag in the input's format (ROS 1 for a ROS 1 input), with a topic like each of
 /// the input's and the events topic: (writer, format, channel per topic, events channel).
-fn open_output(bag: &Bag, out: &Path) -> Result<(AnyWriter, BagFormat, HashMap<String, u16>, u16)> {
+fn open_output(
+    bag: &Bag,
+    out: &Path,
+    compression: Option<&str>,
+) -> Result<(AnyWriter, BagFormat, HashMap<String, u16>, u16)> {
     let topics_in = bag.topics()?;
     let format = if bag.is_ros1_bag() || topics_in.iter().any(|t| t.message_encoding == "ros1") {
         BagFormat::Ros1
     } else {
         BagFormat::Rosbag2
     };
-    let mut w = AnyWriter::create(out, format, None)?;
+    let mut w = AnyWriter::create(out, format, compression)?;
     let mut channel = HashMap::new();
     for t in &topics_in {
         let id = w.add_topic_like(t)?;

@@ -195,6 +195,7 @@ fn small_mcap_bags(msgs: &[Message], tmp: &Path, out: &mut Corpus) {
         let options = WriterOptions {
             compression: c,
             chunk_size: 4 << 10,
+            ..Default::default()
         };
         let mut w = BagWriter::create(&dir, &options).expect("a bag writer");
         for (k, (_, ty, bytes, _)) in msgs.iter().enumerate() {
