@@ -48,8 +48,9 @@ pub trait BusPublisher {
 }
 
 /// A received frame kept for later: on the iceoryx2 bus a reference into shared memory (the
-/// sample is handed back when the frame is dropped), no copy. It may be sent to another thread.
-pub trait HeldFrame: Send {
+/// sample is handed back when the frame is dropped), no copy. It may be sent to another thread
+/// and read from several at once (a ROS 1 egress writes it to every subscriber's socket).
+pub trait HeldFrame: Send + Sync {
     /// The middleware's metadata (sequence number, hop stamps, applied perturbation).
     fn meta(&self) -> &FrameMeta;
     /// The message, borrowing the held bytes.

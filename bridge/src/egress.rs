@@ -13,7 +13,7 @@ use crate::camera_info::{CameraInfoLink, CameraInfoSink};
 use crate::dds::TopicSpec;
 use crate::endpoint::Endpoint;
 use crate::events::EventsHub;
-use crate::frame::{FrameMeta, Payload, StreamKind, monotonic_ns, wall_ns};
+use crate::frame::{StreamKind, monotonic_ns, wall_ns};
 use crate::guard::{Decision, Fallback, Guard, GuardSettings, LocalKill, reader_thread};
 use crate::stats::{AdapterReport, HopLatency, Latency, log_bad};
 use crate::topic::TopicWriter;
@@ -70,9 +70,16 @@ struct Out {
 }
 
 impl Out {
-    /// Publishes one frame; `fallback`: it is the raw frame, published for this reason.
-    fn publish(&mut self, meta: &FrameMeta, payload: &Payload<'_>, fallback: Option<Fallback>) {
-        match self.writer.write(meta.seq, payload) {
+    /// Publishes a frame, handing it to the writer (a ROS 1 writer sends its data from shared
+    /// memory without a copy); `fallback`: it is the raw frame, published for this reason.
+    fn publish_held(&mut self, frame: Held, fallback: Option<Fallback>) {
+        let meta = frame.meta().clone();
+        let (stamp, frame_id) = {
+            let p = frame.payload();
+            let h = p.header();
+            ((h.stamp_sec, h.stamp_nanosec), h.frame_id.to_string())
+        };
+        match self.writer.write_held(meta.seq, frame) {
             Ok(()) => {
                 self.rep.forwarded += 1;
                 // The egress hop ends when the write returns (DDS: written; ROS 1: serialized
@@ -85,8 +92,6 @@ impl Out {
                 if fallback.is_none() {
                     self.hops.add(&h);
                 }
-                let header = payload.header();
-                let stamp = (header.stamp_sec, header.stamp_nanosec);
                 if let Some(ev) = &self.events {
                     let applied = match fallback {
                         None => meta
@@ -100,7 +105,7 @@ impl Out {
                         &self.topic,
                         meta.seq,
                         stamp,
-                        header.frame_id,
+                        &frame_id,
                         applied,
                         fallback.map(Fallback::as_str),
                         wall_ns(),
@@ -254,27 +259,32 @@ fn run_plain(
     let mut last_seq = 0;
     while !ctl.stopped() {
         out.check_qos();
-        let r = sub.recv(POLL, &mut |meta, payload| {
-            out.rep.received += 1;
-            if payload.kind() != kind {
-                out.rep.bad += 1;
-                log_bad(
-                    &out.name,
-                    out.rep.bad,
-                    &"frame of the wrong kind for this topic",
-                );
-                return;
+        match sub.recv_held(POLL) {
+            Ok(frames) => {
+                for h in frames {
+                    out.rep.received += 1;
+                    if h.payload().kind() != kind {
+                        out.rep.bad += 1;
+                        log_bad(
+                            &out.name,
+                            out.rep.bad,
+                            &"frame of the wrong kind for this topic",
+                        );
+                        continue;
+                    }
+                    let lost = h.meta().lost_before;
+                    if lost > 0 {
+                        out.rep.lost_by_cause.upstream += u64::from(lost);
+                        out.gap(h.meta().seq, "upstream", u64::from(lost));
+                    }
+                    last_seq = h.meta().seq;
+                    out.publish_held(h, None);
+                }
             }
-            if meta.lost_before > 0 {
-                out.rep.lost_by_cause.upstream += u64::from(meta.lost_before);
-                out.gap(meta.seq, "upstream", u64::from(meta.lost_before));
+            Err(e) => {
+                out.rep.failed += 1;
+                log_bad(&out.name, out.rep.failed, &e);
             }
-            last_seq = meta.seq;
-            out.publish(meta, payload, None);
-        });
-        if let Err(e) = r {
-            out.rep.failed += 1;
-            log_bad(&out.name, out.rep.failed, &e);
         }
         out.egress_drops(&mut seen_drops, last_seq);
         out.poll_camera_info();
@@ -380,11 +390,11 @@ fn run_guarded(
                 match d {
                     Decision::Perturbed(h) => {
                         last_seq = h.meta().seq;
-                        out.publish(h.meta(), &h.payload(), None);
+                        out.publish_held(h, None);
                     }
                     Decision::Raw(h, why) => {
                         last_seq = h.meta().seq;
-                        out.publish(h.meta(), &h.payload(), Some(why));
+                        out.publish_held(h, Some(why));
                     }
                     Decision::Dropped(seq, why) => {
                         let cause = match why {
@@ -421,7 +431,7 @@ fn run_guarded(
         guard.flush(Fallback::Late, &mut decisions);
         for d in decisions.drain(..) {
             if let Decision::Raw(h, why) = d {
-                out.publish(h.meta(), &h.payload(), Some(why));
+                out.publish_held(h, Some(why));
             }
         }
         out.rep.fallback_raw = guard.fallback;

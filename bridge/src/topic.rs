@@ -2,6 +2,7 @@
 //! or ROS 1 over TCPROS): a bridge can therefore mix them (ROS 1 sensors in, ROS 2 out, or the
 //! other way round). [`crate::endpoint`] opens them.
 
+use crate::bus::Held;
 use crate::dds::Received;
 use crate::frame::Payload;
 use std::time::Duration;
@@ -44,6 +45,12 @@ pub trait TopicWriter: Send {
     /// Publishes one message; `seq` is the frame's sequence number, written into the header
     /// where the message format has one (ROS 1).
     fn write(&mut self, seq: u64, msg: &Payload<'_>) -> anyhow::Result<()>;
+
+    /// Publishes a held frame (see [`crate::bus::HeldFrame`]), which the writer may keep until
+    /// its subscribers have it instead of copying it (ROS 1 does); the others write its payload.
+    fn write_held(&mut self, seq: u64, frame: Held) -> anyhow::Result<()> {
+        self.write(seq, &frame.payload())
+    }
 
     /// Messages written but dropped before they reached a subscriber (a ROS 1 subscriber slower
     /// than the stream); summed over subscribers, including those that left.

@@ -7,6 +7,9 @@
 //! The binaries of the other crates are found next to the test executable's target directory;
 //! build them first (`cargo build --workspace --bins`, the README's test command does).
 
+#[path = "../../bridge/src/bin/common/roscpp.rs"]
+mod roscpp;
+
 use perturb_wire::{FrameHeader, TransportOptions};
 use serde::{Deserialize, Serialize};
 use std::io::{BufRead, BufReader};
@@ -594,45 +597,21 @@ pub const ROSCPP_PACKAGES: &str =
 /// (with a message) when g++ or the headers are missing; a failure under
 /// `PERTURB_REQUIRE_ORACLES=1` (CI).
 pub fn roscpp_publisher() -> Option<PathBuf> {
-    let src = workspace().join("tests/support/ros1_cpp_pub.cpp");
+    roscpp_program("ros1_cpp_pub")
+}
+
+/// `tests/support/<name>.cpp` built with [`roscpp::build`] into `target/roscpp/`.
+fn roscpp_program(name: &str) -> Option<PathBuf> {
+    let src = workspace().join(format!("tests/support/{name}.cpp"));
     // target/<profile>/perturb -> target/
     let target = exe("perturb")
         .parent()
         .and_then(Path::parent)
         .map(Path::to_path_buf)
         .unwrap_or_else(std::env::temp_dir);
-    let dir = target.join("roscpp");
-    let bin = dir.join("ros1_cpp_pub");
-    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
-    if bin.exists() && modified(&bin) >= modified(&src) {
-        return Some(bin);
-    }
-    std::fs::create_dir_all(&dir).expect("target/roscpp");
-    // Built under another name and renamed: concurrent tests never run a half-written binary.
-    let tmp = dir.join(format!("ros1_cpp_pub.{}", std::process::id()));
-    let out = Command::new("g++")
-        .args(["-O1", "-o"])
-        .arg(&tmp)
-        .arg(&src)
-        .args([
-            "-lroscpp",
-            "-lrostime",
-            "-lroscpp_serialization",
-            "-lcpp_common",
-            "-lrosconsole",
-        ])
-        .output();
-    let why = match out {
-        Ok(o) if o.status.success() => {
-            std::fs::rename(&tmp, &bin).expect("installing the roscpp publisher");
-            return Some(bin);
-        }
-        Ok(o) => String::from_utf8_lossy(&o.stderr)
-            .lines()
-            .take(5)
-            .collect::<Vec<_>>()
-            .join("\n"),
-        Err(e) => format!("cannot run g++: {e}"),
+    let why = match roscpp::build(&src, &target.join("roscpp")) {
+        Ok(bin) => return Some(bin),
+        Err(why) => why,
     };
     assert!(
         std::env::var("PERTURB_REQUIRE_ORACLES").ok().as_deref() != Some("1"),

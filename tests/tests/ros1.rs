@@ -1161,6 +1161,148 @@ fn ros1_slow_subscriber_drops_are_counted_and_add_up() {
     );
 }
 
+/// Image data counted while alive (a shared-memory sample held by the publisher's queues).
+struct CountedData {
+    bytes: Vec<u8>,
+    live: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+}
+
+impl perturb_bridge::ros1::publisher::SharedData for CountedData {
+    fn data(&self) -> &[u8] {
+        &self.bytes
+    }
+}
+
+impl Drop for CountedData {
+    fn drop(&mut self) {
+        self.live.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+/// Frames published without a copy (their data written from where it lies, as the egress does
+/// from shared memory) reach rospy byte for byte and are handed back once written; with the
+/// subscriber stopped the publisher never keeps more than `SHARED_IN_FLIGHT` of them (it copies
+/// the rest), and what arrives plus what is counted dropped is every frame.
+#[test]
+// libc's kill.
+#[allow(unsafe_code)]
+fn ros1_frames_published_from_shared_data_arrive_exact_and_are_handed_back() {
+    use perturb_bridge::ros1::publisher::SHARED_IN_FLIGHT;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    if !have_ros1() {
+        return;
+    }
+    let ns = Namespace::new("ros1-shared");
+    let master = Ros1Master::start(&ns.dir);
+    let node = Node::start(&settings(&master, "perturb_shared_test")).unwrap();
+    let mut publisher = node.advertise("/shared/image", ros1::IMAGE).unwrap();
+    let mut sub = ros1_peer(
+        &master,
+        &[
+            "sub",
+            "--topic",
+            "/shared/image",
+            "--type",
+            "image",
+            "--count",
+            "1000",
+            "--timeout",
+            "15",
+            "--name",
+            "shared",
+        ],
+    );
+    let r = ros1_ready(&mut sub);
+    assert!(wait_for(Duration::from_secs(15), || publisher
+        .subscribers()
+        == 1));
+    let live = std::sync::Arc::new(AtomicUsize::new(0));
+    let (w, h) = (640u32, 480u32);
+    let mut expected = Vec::new();
+    let mut send = |publisher: &mut perturb_bridge::ros1::Publisher, k: u32| {
+        let bytes: Vec<u8> = (0..w * h).map(|i| ((i * 7 + k * 13) % 251) as u8).collect();
+        expected.push(format!(
+            "{:x}",
+            <sha2::Sha256 as sha2::Digest>::digest(&bytes)
+        ));
+        let m = ImageMsg {
+            header: Header {
+                stamp_sec: k as i32,
+                stamp_nanosec: 0,
+                frame_id: "cam",
+            },
+            height: h,
+            width: w,
+            encoding: "mono8",
+            is_bigendian: 0,
+            step: w,
+            data: &[],
+        };
+        let parts = m.ros1_parts(k);
+        // The head ends with the data's length prefix: 0 for the empty data; patch it.
+        let mut head = parts.head.clone();
+        let n = head.len();
+        head[n - 4..].copy_from_slice(&(bytes.len() as u32).to_le_bytes());
+        live.fetch_add(1, Ordering::SeqCst);
+        let data = Box::new(CountedData {
+            bytes,
+            live: live.clone(),
+        });
+        assert_eq!(publisher.publish_shared(&head, data, &parts.tail), 1);
+    };
+    // A subscriber that keeps up: every frame shared, none copied.
+    for k in 0..10 {
+        send(&mut publisher, k);
+        std::thread::sleep(Duration::from_millis(60));
+    }
+    assert!(wait_for(Duration::from_secs(5), || live
+        .load(Ordering::SeqCst)
+        == 0));
+    assert_eq!(
+        publisher.copied(),
+        0,
+        "frames copied for a subscriber that kept up"
+    );
+    // SAFETY: signalling our own child process by pid.
+    unsafe { libc::kill(sub.id() as i32, libc::SIGSTOP) };
+    const SENT: u32 = 40;
+    for k in 10..SENT {
+        send(&mut publisher, k);
+        let held = live.load(Ordering::SeqCst);
+        assert!(
+            held <= SHARED_IN_FLIGHT,
+            "{held} shared frames held at frame {k}"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert!(
+        publisher.copied() > 0,
+        "a stopped subscriber got every frame shared"
+    );
+    // SAFETY: as above.
+    unsafe { libc::kill(sub.id() as i32, libc::SIGCONT) };
+    let got = ros1_lines(r, &mut sub);
+    let dropped = publisher.dropped();
+    assert_eq!(
+        got.len() as u64 + dropped,
+        u64::from(SENT),
+        "delivered {} + dropped {dropped}",
+        got.len()
+    );
+    for m in &got {
+        let k = m["sec"].as_u64().unwrap() as usize;
+        assert_eq!(
+            m["sha256"].as_str(),
+            Some(expected[k].as_str()),
+            "frame {k}"
+        );
+    }
+    assert!(got.iter().filter(|m| m["sec"].as_u64() < Some(10)).count() == 10);
+    assert!(wait_for(Duration::from_secs(5), || live
+        .load(Ordering::SeqCst)
+        == 0));
+}
+
 #[test]
 fn ros1_profile_mcap_ouster_replays_through_perturbd() {
     let bag =
@@ -1395,7 +1537,12 @@ fn ros1_events_on_the_bus_recorded_by_rosbag_are_what_perturb_analyze_reads() {
     );
     assert_eq!(sent.len(), 90);
     std::thread::sleep(Duration::from_millis(500));
-    assert!(interrupt(&mut rec), "rosbag record did not stop");
+    // rosbag's Python wrapper may exit non-zero on SIGINT under load (its child had it too);
+    // what counts is that it stopped and its bag is read below.
+    assert!(
+        perturb_wire::process::interrupt(&mut rec, Duration::from_secs(15)).is_some(),
+        "rosbag record did not stop"
+    );
     assert!(interrupt(&mut bridge), "{}", log_of(&ns, "bridge.log"));
     let out = ns.dir.join("study");
     let o = ns

@@ -1,11 +1,18 @@
 //! Measures the ROS 1 egress latency of the bridge's TCPROS publisher on this machine, against a
-//! real ROS 1 subscriber: Debian's rospy (`tests/tests/ros1_peer.py sub`, with Autoware Mini's
-//! `buff_size` 2**26 and `tcp_nodelay`), or the bridge's own subscriber in a second process.
+//! real ROS 1 subscriber: Debian's roscpp (`tests/support/ros1_cpp_sub.cpp`, built once with g++,
+//! `tcp_nodelay`), rospy (`tests/tests/ros1_peer.py sub`, with Autoware Mini's `buff_size` 2**26
+//! and `tcp_nodelay`), or the bridge's own subscriber in a second process.
 //!
 //! ```sh
+//! cargo run --release -p perturb-bridge --bin ros1_latency -- --subscriber roscpp --image 1920x1208 --path both
 //! cargo run --release -p perturb-bridge --bin ros1_latency -- --subscriber rospy --image 1920x1208
 //! cargo run --release -p perturb-bridge --bin ros1_latency -- --subscriber bridge --cloud 120000
 //! ```
+//!
+//! `--path` chooses how the publisher sends the frame's data: `copy` serializes the whole message
+//! into one buffer (`Publisher::publish`), `shared` writes the header and tail around the data
+//! where it lies with one vectored write (`Publisher::publish_shared`, the egress path for frames
+//! in shared memory), `both` alternates the two frame by frame and reports each.
 //!
 //! It starts Debian's `rosmaster --core` on a free loopback port (private ROS_HOME), publishes
 //! `--count` frames at `--rate` Hz, and writes `CLOCK_MONOTONIC` at the moment it calls
@@ -15,13 +22,17 @@
 //! frame that left the daemon.
 
 mod common;
+#[path = "common/roscpp.rs"]
+mod roscpp;
 
 use perturb_bridge::dds::{Qos, Received, RosType, TopicSpec};
 use perturb_bridge::frame::{OwnedPayload, Payload, monotonic_ns};
-use perturb_bridge::ros1::{Node, Ros1Settings, TopicReader1};
+use perturb_bridge::ros1::{Node, Ros1Settings, SharedData, TopicReader1};
 use perturb_bridge::stats::summarize;
 use perturb_bridge::topic::TopicReader;
+use std::collections::HashMap;
 use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 struct Args {
@@ -32,6 +43,7 @@ struct Args {
     count: usize,
     rate: f64,
     master: Option<String>,
+    path: String,
 }
 
 fn parse() -> Result<Args, String> {
@@ -43,6 +55,7 @@ fn parse() -> Result<Args, String> {
         count: 100,
         rate: 10.0,
         master: None,
+        path: "shared".into(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -62,9 +75,15 @@ fn parse() -> Result<Args, String> {
             "--cloud" => a.cloud = Some(v()?.parse().map_err(|e| format!("--cloud: {e}"))?),
             "--count" => a.count = v()?.parse().map_err(|e| format!("--count: {e}"))?,
             "--rate" => a.rate = v()?.parse().map_err(|e| format!("--rate: {e}"))?,
+            "--path" => {
+                a.path = v()?;
+                if !["copy", "shared", "both"].contains(&a.path.as_str()) {
+                    return Err(format!("--path {}: copy, shared or both", a.path));
+                }
+            }
             "-h" | "--help" => {
                 println!(
-                    "ros1_latency [--subscriber rospy|bridge] (--image WxH | --cloud POINTS) [--count N] [--rate HZ]"
+                    "ros1_latency [--subscriber roscpp|rospy|bridge] (--image WxH | --cloud POINTS) [--count N] [--rate HZ] [--path copy|shared|both]"
                 );
                 std::process::exit(0);
             }
@@ -161,27 +180,46 @@ fn writer(a: &Args) -> Result<(), String> {
     let frame_id = if a.cloud.is_some() { "lidar" } else { "camera" };
     let mut frame = common::test_frame(a.image, a.cloud, frame_id)?;
     let bytes = frame.payload().data().len();
+    // The frame's data as a sample in shared memory would hold it: sent from where it lies on
+    // the shared path.
+    let sample: Arc<[u8]> = frame.payload().data().into();
+    let shared_at = |k: usize| match a.path.as_str() {
+        "copy" => false,
+        "shared" => true,
+        _ => k % 2 == 1,
+    };
     // Warm-up: 10 frames, not counted.
-    for _ in 0..10 {
-        publish(&mut publisher, &mut frame);
+    for k in 0..10 {
+        publish(&mut publisher, &mut frame, shared_at(k).then_some(&sample));
         std::thread::sleep(Duration::from_millis(100));
     }
     std::thread::sleep(Duration::from_millis(500));
     while rx.try_recv().is_ok() {}
+    let copied_before = publisher.copied();
     let period = Duration::from_secs_f64(1.0 / a.rate);
     let start = Instant::now();
-    let mut sent = Vec::new();
+    let mut sent: HashMap<bool, Vec<u64>> = HashMap::new();
+    let mut path_of = HashMap::new();
     for k in 0..a.count {
         let due = start + period * k as u32;
         if let Some(d) = due.checked_duration_since(Instant::now()) {
             std::thread::sleep(d);
         }
         let t0 = monotonic_ns();
-        publish(&mut publisher, &mut frame);
-        sent.push(monotonic_ns() - t0);
+        let stamp = publish(&mut publisher, &mut frame, shared_at(k).then_some(&sample));
+        sent.entry(shared_at(k))
+            .or_default()
+            .push(monotonic_ns() - t0);
+        path_of.insert(stamp, shared_at(k));
     }
     std::thread::sleep(Duration::from_secs(2));
-    let lat = latencies(&rx, a.subscriber == "rospy");
+    let mut lat: HashMap<bool, Vec<u64>> = HashMap::new();
+    for (stamp, l) in latencies(&rx, a.subscriber == "rospy") {
+        if let Some(&shared) = path_of.get(&stamp) {
+            lat.entry(shared).or_default().push(l);
+        }
+    }
+    let copied = publisher.copied() - copied_before;
     let _ = child.kill();
     let _ = child.wait();
     drop(publisher);
@@ -189,36 +227,68 @@ fn writer(a: &Args) -> Result<(), String> {
     let _ = master.kill();
     let _ = master.wait();
     let _ = std::fs::remove_dir_all(&home);
-    let s = summarize(&lat);
-    let p = summarize(&sent);
     let what = match (a.image, a.cloud) {
         (_, Some(n)) => format!("{n}-point cloud"),
         (Some((w, h)), None) => format!("{w}x{h} rgb8"),
         (None, None) => "frame".into(),
     };
-    println!(
-        "bridge -> {} | {what} ({:.1} MB) | {} of {} received | p50 {:.2} ms | p99 {:.2} ms | max {:.2} ms | publish call p50 {:.2} ms",
-        a.subscriber,
-        bytes as f64 / 1e6,
-        lat.len(),
-        a.count,
-        s.p50_ms,
-        s.p99_ms,
-        s.max_ms,
-        p.p50_ms
-    );
+    for shared in [false, true] {
+        let Some(sent) = sent.get(&shared) else {
+            continue;
+        };
+        let got = lat.get(&shared).cloned().unwrap_or_default();
+        let s = summarize(&got);
+        let p = summarize(sent);
+        println!(
+            "bridge -> {} | {what} ({:.1} MB) | path {} | {} of {} received | p50 {:.2} ms | p99 {:.2} ms | max {:.2} ms | publish call p50 {:.2} ms{}",
+            a.subscriber,
+            bytes as f64 / 1e6,
+            if shared { "shared" } else { "copy" },
+            got.len(),
+            sent.len(),
+            s.p50_ms,
+            s.p99_ms,
+            s.max_ms,
+            p.p50_ms,
+            if shared {
+                format!(" | {copied} sent as copies (subscriber behind)")
+            } else {
+                String::new()
+            }
+        );
+    }
     Ok(())
 }
 
-/// Stamps `f` with the time now and publishes it (its header and tail around its data).
-fn publish(p: &mut perturb_bridge::ros1::Publisher, f: &mut OwnedPayload) {
-    common::set_stamp(f, monotonic_ns(), None);
+/// A frame's data held as a shared-memory sample is: reference-counted, never copied.
+struct SampleData(Arc<[u8]>);
+
+impl SharedData for SampleData {
+    fn data(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+/// Stamps `f` with the time now and publishes it (its header and tail around its data): copied
+/// into one buffer, or with `sample` (the same bytes as `f`'s data) sent from where it lies.
+/// Returns the stamp (ns) as the subscriber reads it back.
+fn publish(
+    p: &mut perturb_bridge::ros1::Publisher,
+    f: &mut OwnedPayload,
+    sample: Option<&Arc<[u8]>>,
+) -> u64 {
+    let now = monotonic_ns();
+    common::set_stamp(f, now, None);
     let payload = f.payload();
     let parts = match &payload {
         Payload::Image(m) => m.ros1_parts(0),
         Payload::Cloud(m) => m.ros1_parts(0),
     };
-    p.publish(&[&parts.head, parts.data, &parts.tail]);
+    match sample {
+        Some(s) => p.publish_shared(&parts.head, Box::new(SampleData(s.clone())), &parts.tail),
+        None => p.publish(&[&parts.head, parts.data, &parts.tail]),
+    };
+    (now / 1_000_000_000) as i32 as u32 as u64 * 1_000_000_000 + now % 1_000_000_000
 }
 
 /// The subscriber measured: rospy (`tests/tests/ros1_peer.py`) or this program as the reader.
@@ -249,6 +319,31 @@ fn spawn_subscriber(a: &Args, uri: &str, home: &std::path::Path) -> Result<Child
                 .spawn()
                 .map_err(|e| e.to_string())
         }
+        "roscpp" => {
+            let src = concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/../tests/support/ros1_cpp_sub.cpp"
+            );
+            // target/<profile>/ros1_latency -> target/roscpp/
+            let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+            let out = exe
+                .parent()
+                .and_then(std::path::Path::parent)
+                .ok_or("no target directory")?
+                .join("roscpp");
+            let bin = roscpp::build(std::path::Path::new(src), &out).map_err(|e| {
+                format!("building the roscpp subscriber (apt-get install g++ libroscpp-dev libsensor-msgs-dev): {e}")
+            })?;
+            Command::new(bin)
+                .args([TOPIC, kind])
+                .env("ROS_MASTER_URI", uri)
+                .env("ROS_HOSTNAME", "127.0.0.1")
+                .env("ROS_HOME", home)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::inherit())
+                .spawn()
+                .map_err(|e| e.to_string())
+        }
         "bridge" => Command::new(std::env::current_exe().map_err(|e| e.to_string())?)
             .args(["--role-reader", "--master", uri])
             .args(if a.cloud.is_some() {
@@ -260,13 +355,13 @@ fn spawn_subscriber(a: &Args, uri: &str, home: &std::path::Path) -> Result<Child
             .stderr(Stdio::inherit())
             .spawn()
             .map_err(|e| e.to_string()),
-        o => Err(format!("--subscriber {o}: rospy or bridge")),
+        o => Err(format!("--subscriber {o}: roscpp, rospy or bridge")),
     }
 }
 
-/// The latencies (ns) the subscriber printed: rospy's JSON lines (arrival time and stamp), or
-/// the reader's `arrival stamp` lines.
-fn latencies(rx: &crossbeam::channel::Receiver<String>, rospy: bool) -> Vec<u64> {
+/// The stamps and latencies (ns) the subscriber printed: rospy's JSON lines (arrival time and
+/// stamp), or the `arrival stamp` lines of roscpp and the reader.
+fn latencies(rx: &crossbeam::channel::Receiver<String>, rospy: bool) -> Vec<(u64, u64)> {
     let mut lat = Vec::new();
     while let Ok(l) = rx.try_recv() {
         if rospy {
@@ -279,12 +374,13 @@ fn latencies(rx: &crossbeam::channel::Receiver<String>, rospy: bool) -> Vec<u64>
                 v["sec"].as_u64(),
                 v["nsec"].as_u64(),
             ) {
-                lat.push(t.saturating_sub(s * 1_000_000_000 + n));
+                let stamp = s * 1_000_000_000 + n;
+                lat.push((stamp, t.saturating_sub(stamp)));
             }
         } else if let Some((t, s)) = l.split_once(' ')
             && let (Ok(t), Ok(s)) = (t.parse::<u64>(), s.parse::<u64>())
         {
-            lat.push(t.saturating_sub(s));
+            lat.push((s, t.saturating_sub(s)));
         }
     }
     lat

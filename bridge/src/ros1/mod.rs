@@ -26,9 +26,10 @@ pub mod tcpros;
 pub mod xmlrpc;
 
 pub use node::Node;
-pub use publisher::Publisher;
+pub use publisher::{Publisher, SHARED_IN_FLIGHT, SharedData};
 pub use subscriber::Subscriber;
 
+use crate::bus::Held;
 use crate::dds::{Received, RosType, TopicSpec};
 use crate::frame::Payload;
 use crate::topic::{OnMessage, Ros1Seq, TopicReader, TopicWriter};
@@ -224,18 +225,45 @@ impl TopicWriter1 {
 
 impl TopicWriter for TopicWriter1 {
     fn write(&mut self, seq: u64, msg: &Payload<'_>) -> anyhow::Result<()> {
-        // ROS 1 sequence numbers are 32 bits; a longer run wraps, as roscpp's counter does.
-        let parts = match msg {
-            Payload::Image(m) => m.ros1_parts(seq as u32),
-            Payload::Cloud(m) => m.ros1_parts(seq as u32),
-        };
+        let parts = ros1_parts(msg, seq);
         self.publisher
             .publish(&[&parts.head, parts.data, &parts.tail]);
         Ok(())
     }
 
+    fn write_held(&mut self, seq: u64, frame: Held) -> anyhow::Result<()> {
+        let (head, tail) = {
+            let parts = ros1_parts(&frame.payload(), seq);
+            (parts.head, parts.tail)
+        };
+        self.publisher
+            .publish_shared(&head, Box::new(HeldData(frame)), &tail);
+        Ok(())
+    }
+
     fn dropped(&self) -> u64 {
         self.publisher.dropped()
+    }
+}
+
+/// The ROS 1 serialization of a frame with header `seq` (ROS 1 sequence numbers are 32 bits; a
+/// longer run wraps, as roscpp's counter does).
+fn ros1_parts<'a>(msg: &Payload<'a>, seq: u64) -> ros1::Ros1Parts<'a> {
+    match msg {
+        Payload::Image(m) => m.ros1_parts(seq as u32),
+        Payload::Cloud(m) => m.ros1_parts(seq as u32),
+    }
+}
+
+/// A held frame's data bytes, written to the subscribers from where they lie.
+struct HeldData(Held);
+
+impl publisher::SharedData for HeldData {
+    fn data(&self) -> &[u8] {
+        match self.0.payload() {
+            Payload::Image(m) => m.data,
+            Payload::Cloud(m) => m.data,
+        }
     }
 }
 

@@ -1,26 +1,79 @@
 //! Publications: each connected subscriber has its own writer thread and a queue of two
 //! messages, so a slow subscriber (a rospy node whose callback takes long stops reading its
 //! socket) delays only itself; when its queue is full the oldest message is dropped and counted,
-//! as roscpp does. A message is serialized once, into a recycled buffer shared by every queue.
+//! as roscpp does. A message is serialized once and shared by every queue: small messages into a
+//! recycled buffer, a sensor frame as its header and tail around a reference to its data where
+//! they lie ([`Publisher::publish_shared`]: shared memory), written with one vectored write.
 
 use super::node::Shared;
 use super::xmlrpc::Value;
 use perturb_core::formats::ros1::MsgType;
 use std::collections::VecDeque;
-use std::io::Write;
+use std::io::{IoSlice, Write};
 use std::net::TcpStream;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex, Weak};
 use tracing::{debug, info};
 
 /// Messages a subscriber's queue holds before the oldest is dropped.
 const LINK_QUEUE: usize = 2;
 
+/// Shared messages (references to data held elsewhere) a publication keeps in its queues at
+/// once; past this the next message is copied, so that a stalled subscriber never holds more
+/// than this many of the bus's frames (an iceoryx2 subscriber may hold only a few).
+pub const SHARED_IN_FLIGHT: usize = 2;
+
+/// Bytes kept where they lie until every subscriber has written them (a frame's data in shared
+/// memory): [`Publisher::publish_shared`] writes them without copying.
+pub trait SharedData: Send + Sync {
+    /// The bytes.
+    fn data(&self) -> &[u8];
+}
+
+/// A message as the subscribers' queues hold it.
+enum Msg {
+    /// Serialized into one buffer, its length prefix included.
+    Flat(Vec<u8>),
+    /// The length prefix and the fields before the data, the data where it lies, the fields
+    /// after it.
+    Shared {
+        head: Vec<u8>,
+        data: Box<dyn SharedData>,
+        tail: Vec<u8>,
+    },
+}
+
+impl Msg {
+    /// Writes the whole message (a vectored write for a shared one: no copy of its data).
+    fn write_to(&self, w: &mut impl Write) -> std::io::Result<()> {
+        match self {
+            Msg::Flat(v) => w.write_all(v),
+            Msg::Shared { head, data, tail } => {
+                let mut parts = [
+                    IoSlice::new(head),
+                    IoSlice::new(data.data()),
+                    IoSlice::new(tail),
+                ];
+                let mut bufs = &mut parts[..];
+                while !bufs.is_empty() {
+                    match w.write_vectored(bufs) {
+                        Ok(0) => return Err(std::io::ErrorKind::WriteZero.into()),
+                        Ok(n) => IoSlice::advance_slices(&mut bufs, n),
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                        Err(e) => return Err(e),
+                    }
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
 /// One connected subscriber.
 struct Link {
     id: u32,
     caller: String,
-    queue: Mutex<VecDeque<Arc<Vec<u8>>>>,
+    queue: Mutex<VecDeque<Arc<Msg>>>,
     wake: Condvar,
     alive: AtomicBool,
     dropped: AtomicU64,
@@ -102,7 +155,7 @@ impl PubShared {
             let Some(msg) = next else {
                 break "closed".to_string();
             };
-            if let Err(e) = w.write_all(&msg) {
+            if let Err(e) = msg.write_to(&mut w) {
                 break e.to_string();
             }
         };
@@ -126,7 +179,7 @@ impl PubShared {
     }
 
     /// Queues a framed message on every link; returns how many.
-    fn enqueue(&self, msg: &Arc<Vec<u8>>) -> usize {
+    fn enqueue(&self, msg: &Arc<Msg>) -> usize {
         let Ok(links) = self.links.lock() else {
             return 0;
         };
@@ -198,7 +251,11 @@ pub struct Publisher {
     shared: Arc<PubShared>,
     node: Arc<Shared>,
     /// Message buffers, reused once every link has written them.
-    pool: Vec<Arc<Vec<u8>>>,
+    pool: Vec<Arc<Msg>>,
+    /// The shared messages still in some queue or being written.
+    in_flight: Vec<Weak<Msg>>,
+    /// Messages given as shared data and copied because [`SHARED_IN_FLIGHT`] were in flight.
+    copied: u64,
 }
 
 impl Publisher {
@@ -207,6 +264,8 @@ impl Publisher {
             shared,
             node,
             pool: Vec::new(),
+            in_flight: Vec::new(),
+            copied: 0,
         }
     }
 
@@ -225,14 +284,20 @@ impl Publisher {
         self.shared.dropped()
     }
 
+    /// Messages given to [`Publisher::publish_shared`] that were copied all the same, because
+    /// subscribers still held [`SHARED_IN_FLIGHT`] earlier ones.
+    pub fn copied(&self) -> u64 {
+        self.copied
+    }
+
     /// True once the master knows this publication.
     pub fn is_registered(&self) -> bool {
         self.shared.registered.load(Ordering::Relaxed)
     }
 
     /// Publishes one message given as consecutive parts (see
-    /// [`perturb_core::formats::ros1::Ros1Parts`]); returns how many subscribers it was queued
-    /// for. Nothing is serialized when nobody subscribes.
+    /// [`perturb_core::formats::ros1::Ros1Parts`]), copied into one buffer; returns how many
+    /// subscribers it was queued for. Nothing is serialized when nobody subscribes.
     pub fn publish(&mut self, parts: &[&[u8]]) -> usize {
         if self.shared.subscribers() == 0 {
             return 0;
@@ -240,10 +305,9 @@ impl Publisher {
         let len: usize = parts.iter().map(|p| p.len()).sum();
         let mut buf = match self.pool.iter().position(|b| Arc::strong_count(b) == 1) {
             Some(i) => self.pool.swap_remove(i),
-            None => Arc::new(Vec::with_capacity(len + 4)),
+            None => Arc::new(Msg::Flat(Vec::with_capacity(len + 4))),
         };
-        {
-            let v = Arc::get_mut(&mut buf).expect("only the pool held it");
+        if let Some(Msg::Flat(v)) = Arc::get_mut(&mut buf) {
             v.clear();
             v.extend_from_slice(&(len as u32).to_le_bytes());
             for p in parts {
@@ -255,6 +319,32 @@ impl Publisher {
             self.pool.push(buf);
         }
         n
+    }
+
+    /// Publishes the message `head ++ data ++ tail` without copying `data`: every subscriber's
+    /// writer sends it from where it lies, and `data` is dropped (a shared-memory sample handed
+    /// back) once the last one has. While [`SHARED_IN_FLIGHT`] shared messages are still queued
+    /// or being written, the message is copied instead (counted in [`Publisher::copied`]).
+    pub fn publish_shared(&mut self, head: &[u8], data: Box<dyn SharedData>, tail: &[u8]) -> usize {
+        if self.shared.subscribers() == 0 {
+            return 0;
+        }
+        self.in_flight.retain(|m| m.strong_count() > 0);
+        if self.in_flight.len() >= SHARED_IN_FLIGHT {
+            self.copied += 1;
+            return self.publish(&[head, data.data(), tail]);
+        }
+        let len = head.len() + data.data().len() + tail.len();
+        let mut with_len = Vec::with_capacity(head.len() + 4);
+        with_len.extend_from_slice(&(len as u32).to_le_bytes());
+        with_len.extend_from_slice(head);
+        let msg = Arc::new(Msg::Shared {
+            head: with_len,
+            data,
+            tail: tail.to_vec(),
+        });
+        self.in_flight.push(Arc::downgrade(&msg));
+        self.shared.enqueue(&msg)
     }
 }
 

@@ -37,10 +37,20 @@ impl Origin {
 }
 
 /// A received frame: the shared-memory sample, read in place. Dropping it hands the memory back
-/// to the publisher. Frames may be sent to another thread.
+/// to the publisher. Frames may be sent to another thread and read from several at once.
 pub struct Frame {
     sample: Sample<Ipc, [u8], FrameHeader>,
 }
+
+// SAFETY: a `Frame` is only read through `&self` (`header`, `payload`, `origin`: reads through
+// the sample's chunk pointers, which never change, into memory the publisher no longer writes
+// once it has sent the sample, and of its plain details); the one mutation, handing the sample
+// back, is in `Drop`, which owns it. iceoryx2's `Sample` is not `Sync` only because its chunk
+// holds raw pointers (the compiler names nothing else: the thread-safe service's shared state is
+// `Sync`). Reading one frame from several threads at once is what a ROS 1 egress does when it
+// writes the frame's data to several subscribers' sockets.
+#[allow(unsafe_code)]
+unsafe impl Sync for Frame {}
 
 impl std::fmt::Debug for Frame {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
