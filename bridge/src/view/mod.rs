@@ -3,8 +3,8 @@
 //! (`docs/live-view.md`):
 //!
 //! - per stream, raw beside perturbed: camera frames as JPEG (`/<stream>/raw/image`,
-//!   `/<stream>/perturbed/image`, `foxglove.CompressedImage`, at `rate_hz`, shrunk by
-//!   `downscale`), clouds as `foxglove.PointCloud` (`/<stream>/raw/points`, `.../perturbed/points`,
+//!   `/<stream>/perturbed/image`, `foxglove.CompressedImage`, at `rate_hz`, shrunk to at most
+//!   `max_width`), clouds as `foxglove.PointCloud` (`/<stream>/raw/points`, `.../perturbed/points`,
 //!   at `cloud_rate_hz`, thinned to `max_points`), the stream's `camera_info` when its ingress
 //!   relays one (`/<stream>/camera_info`, `foxglove.CameraCalibration`, scaled to the JPEG);
 //! - the events records (`/perturb/events`, JSON, `docs/events.schema.json`), the daemon's state
@@ -389,7 +389,6 @@ impl Adapter for View {
             };
             rep.received += n(raw, |c| &c.received) + n(pert, |c| &c.received);
             rep.forwarded += n(raw, |c| &c.shown) + n(pert, |c| &c.shown);
-            rep.dropped += n(raw, |c| &c.missed) + n(pert, |c| &c.missed);
             rep.bad += n(raw, |c| &c.failed) + n(pert, |c| &c.failed);
             rep.notes.push(format!(
                 "{stream}: {} raw and {} perturbed frames shown, {} and {} missed (view only)",
@@ -487,7 +486,9 @@ impl View {
             }
         };
         let mut last_seq = None;
-        let mut last_shown: Option<Instant> = None;
+        // When the next frame is due: one period after the last one was due (not after it was
+        // sent), so a 30 Hz stream shown at 10 Hz gets every third frame, not every fourth.
+        let mut next_due = Instant::now();
         let mut scratch = perturb_core::encoding::Scratch::new();
         let mut decoder: Option<frames::CalibrationDecoder> = None;
         let mut bad = 0u64;
@@ -514,12 +515,13 @@ impl View {
                 .skipped
                 .fetch_add(superseded, Ordering::Relaxed);
             let now = Instant::now();
-            let due = last_shown.is_none_or(|t| now.duration_since(t) >= job.period);
-            if !due || !job.out.has_sinks() {
+            // A quarter of a period early still counts (frames come on the sensor's grid).
+            if now + job.period / 4 < next_due || !job.out.has_sinks() {
                 job.counters.skipped.fetch_add(1, Ordering::Relaxed);
                 continue;
             }
-            last_shown = Some(now);
+            // After a pause (or from a source slower than the view) the schedule starts anew.
+            next_due = (next_due + job.period).max(now);
             let t0 = monotonic_ns();
             let sent = match &job.out {
                 Out::Image {
@@ -527,7 +529,7 @@ impl View {
                     calibration,
                 } => {
                     let shrunk =
-                        frames::shrink(&newest.payload(), self.cfg.downscale, &mut scratch);
+                        frames::shrink(&newest.payload(), self.cfg.max_width, &mut scratch);
                     drop(newest);
                     shrunk.and_then(|s| {
                         let msg = frames::jpeg(&s, self.cfg.jpeg_quality)?;
@@ -539,7 +541,7 @@ impl View {
                                 decoder = Some(frames::CalibrationDecoder::new()?);
                             }
                             let d = decoder.as_ref().expect("made above");
-                            ch.log(&d.calibration(&c, self.cfg.downscale)?);
+                            ch.log(&d.calibration(&c, s.factor)?);
                         }
                         Ok(())
                     })
