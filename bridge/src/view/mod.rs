@@ -381,7 +381,17 @@ impl Adapter for View {
             stop.store(true, Ordering::Relaxed);
             Ok(())
         })?;
-        server.stop().wait_blocking();
+        // A viewer that stopped reading keeps its connection's tasks waiting on a full socket:
+        // the server gets two seconds to close, then its tasks are dropped with the runtime.
+        let closed = runtime.block_on(async {
+            tokio::time::timeout(Duration::from_secs(2), server.stop().wait())
+                .await
+                .is_ok()
+        });
+        if !closed {
+            rep.notes
+                .push("the view's server did not close within 2 s (a viewer not reading)".into());
+        }
         runtime.shutdown_timeout(Duration::from_secs(2));
         for ((stream, _), (raw, pert)) in self.streams.iter().zip(&counters) {
             let n = |c: &SideCounters, f: fn(&SideCounters) -> &std::sync::atomic::AtomicU64| {
