@@ -135,6 +135,20 @@ pub fn streams(
         .collect()
 }
 
+/// The view's topics of a stream (`side`: a frame side; `None`: the stream's own topics).
+pub fn topic(stream: &str, side: Option<Side>, kind: StreamKind) -> String {
+    match (side, kind) {
+        (Some(side), StreamKind::Image) => format!("/{stream}/{}/image", side.as_str()),
+        (Some(side), StreamKind::Cloud) => format!("/{stream}/{}/points", side.as_str()),
+        (None, _) => format!("/{stream}/stats"),
+    }
+}
+
+/// The topic of a camera stream's calibration.
+pub fn calibration_topic(stream: &str) -> String {
+    format!("/{stream}/camera_info")
+}
+
 /// What one stream side sends its frames on.
 enum Out {
     Image {
@@ -212,17 +226,15 @@ impl Adapter for View {
         let mut stats_channels = Vec::new();
         for ((stream, kind), (raw_c, pert_c)) in self.streams.iter().zip(&counters) {
             for (side, c) in [(Side::Raw, raw_c), (Side::Perturbed, pert_c)] {
-                let topic = |leaf: &str| format!("/{stream}/{}/{leaf}", side.as_str());
+                let frames = topic(stream, Some(side), *kind);
                 let (out, hz) = match kind {
                     StreamKind::Image => (
                         Out::Image {
-                            channel: ctx
-                                .channel_builder(topic("image"))
-                                .build::<CompressedImage>(),
+                            channel: ctx.channel_builder(&frames).build::<CompressedImage>(),
                             calibration: match (side, self.calibrations.get(stream)) {
                                 (Side::Raw, Some(link)) => Some((
                                     link.clone(),
-                                    ctx.channel_builder(format!("/{stream}/camera_info"))
+                                    ctx.channel_builder(calibration_topic(stream))
                                         .build::<CameraCalibration>(),
                                 )),
                                 _ => None,
@@ -231,7 +243,7 @@ impl Adapter for View {
                         self.cfg.rate_hz,
                     ),
                     StreamKind::Cloud => (
-                        Out::Cloud(ctx.channel_builder(topic("points")).build::<PointCloud>()),
+                        Out::Cloud(ctx.channel_builder(&frames).build::<PointCloud>()),
                         self.cfg.cloud_rate_hz,
                     ),
                 };
@@ -246,7 +258,7 @@ impl Adapter for View {
             }
             stats_channels.push(json_channel(
                 &ctx,
-                &format!("/{stream}/stats"),
+                &topic(stream, None, *kind),
                 "perturb.ViewStats",
                 stats::STATS_SCHEMA,
             )?);
@@ -570,6 +582,90 @@ impl View {
                     crate::stats::log_bad(&what, bad, &e);
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::Value;
+
+    /// The schema node a dotted field path leads to in `schema` (following `$ref`s to `$defs`).
+    fn field<'a>(schema: &'a Value, path: &str) -> Option<&'a Value> {
+        let mut node = schema;
+        for part in path.split('.') {
+            while let Some(r) = node["$ref"].as_str() {
+                node = &schema["$defs"][r.strip_prefix("#/$defs/")?];
+            }
+            node = node["properties"].get(part)?;
+        }
+        Some(node)
+    }
+
+    #[test]
+    fn the_layout_shows_topics_and_fields_the_view_sends() {
+        let layout: Value =
+            serde_json::from_str(include_str!("../../../config/foxglove-view-layout.json"))
+                .unwrap();
+        // config/bridge-synthetic.toml's streams, which `perturb demo` runs.
+        let mut topics = vec![
+            "/perturb/events".to_string(),
+            "/perturb/status".to_string(),
+            calibration_topic("camera_front"),
+        ];
+        for (stream, kind) in [
+            ("camera_front", StreamKind::Image),
+            ("lidar_top", StreamKind::Cloud),
+        ] {
+            topics.push(topic(stream, None, kind));
+            for side in [Side::Raw, Side::Perturbed] {
+                topics.push(topic(stream, Some(side), kind));
+            }
+        }
+        let stats: Value = serde_json::from_str(stats::STATS_SCHEMA).unwrap();
+        let mut seen = 0;
+        for (id, panel) in layout["configById"].as_object().unwrap() {
+            let mut named: Vec<&str> = ["imageTopic", "calibrationTopic"]
+                .iter()
+                .filter_map(|k| panel["imageMode"][*k].as_str())
+                .chain(panel["topicPath"].as_str())
+                .collect();
+            named.extend(
+                panel["topics"]
+                    .as_object()
+                    .into_iter()
+                    .flatten()
+                    .map(|(t, _)| t.as_str()),
+            );
+            for p in panel["paths"].as_array().into_iter().flatten() {
+                let path = p["value"].as_str().unwrap();
+                let (t, fields) = path.split_once('.').unwrap();
+                assert!(t.ends_with("/stats"), "{id}: {path}");
+                assert!(
+                    field(&stats, fields).is_some(),
+                    "{id}: {path}: no such field"
+                );
+                named.push(t);
+            }
+            for t in named {
+                assert!(topics.iter().any(|x| x == t), "{id}: the view sends no {t}");
+                seen += 1;
+            }
+        }
+        assert!(seen >= 10, "{seen} topics named");
+        let ids: Vec<String> = layout["configById"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .cloned()
+            .collect();
+        let tree = layout["layout"].to_string();
+        for id in ids {
+            assert!(
+                tree.contains(&format!("\"{id}\"")),
+                "{id} is not in the layout tree"
+            );
         }
     }
 }
