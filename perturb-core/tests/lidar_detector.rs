@@ -442,18 +442,24 @@ fn render(
     img
 }
 
-#[test]
-#[ignore = "writes bird's-eye views of the labelled KITTI frames with the detector's boxes to $PERTURB_BEV_DIR (default target/bev)"]
-fn birds_eye_views_of_the_kitti_frames() {
-    let Some(data) = common::shared_data("birds_eye_views_of_the_kitti_frames") else {
-        return;
-    };
+/// Where the bird's-eye views go: `$PERTURB_BEV_DIR`, default `target/bev` (created).
+fn bev_dir() -> std::path::PathBuf {
     let dir = std::env::var_os("PERTURB_BEV_DIR")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| {
             std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/bev")
         });
     std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+#[ignore = "writes bird's-eye views of the labelled KITTI frames with the detector's boxes to $PERTURB_BEV_DIR (default target/bev)"]
+fn birds_eye_views_of_the_kitti_frames() {
+    let Some(data) = common::shared_data("birds_eye_views_of_the_kitti_frames") else {
+        return;
+    };
+    let dir = bev_dir();
     let mut det = Detector::new(DetectorConfig::default());
     for f in frames(&data) {
         for (tag, thinning) in [
@@ -719,12 +725,7 @@ fn birds_eye_views_of_the_ouster_and_velodyne_captures() {
     else {
         return;
     };
-    let dir = std::env::var_os("PERTURB_BEV_DIR")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/bev")
-        });
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = bev_dir();
     // Ouster OS1-64: 64 beams evenly over 33.2 degrees, 2048 columns; its frame looks along -x.
     let mut os1 = SensorModel::vlp32c();
     os1.name = "OS1-64";
