@@ -3,7 +3,7 @@
 // to decode the Foxglove schemas from the descriptors the server advertises, jpeg-js to decode the
 // camera frames, ajv to check the JSON messages against the schemas advertised with them.
 //
-//   node client.js ws://127.0.0.1:PORT [--stall]
+//   node client.js ws://127.0.0.1:PORT [--stall] [--count-only]
 //
 // It subscribes to every channel the server advertises and prints one JSON line when it has
 // seen the channels (`{"ready": ...}`), then reads commands from stdin, one JSON object a line:
@@ -11,7 +11,8 @@
 //   {"cmd": "report"}  -> {"report": {topic: {count, schema, rate_hz, images, points, invalid, last}}}
 //   {"cmd": "quit"}
 // With --stall it stops reading the socket once subscribed (a viewer that hangs): the server's
-// queue for it fills and must not hold anything else up.
+// queue for it fills and must not hold anything else up. With --count-only it counts messages
+// without decoding them (a viewer whose decoding runs elsewhere: benches/view/measure.py).
 "use strict";
 
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
@@ -24,6 +25,7 @@ const readline = require("readline");
 
 const url = process.argv[2];
 const stall = process.argv.includes("--stall");
+const countOnly = process.argv.includes("--count-only");
 const say = (o) => process.stdout.write(JSON.stringify(o) + "\n");
 
 // The Rust SDK's server speaks the protocol under the name foxglove.sdk.v1 (the same messages
@@ -79,6 +81,7 @@ function take(topic, schemaName, bytes) {
   t.first_ms ??= now;
   t.last_ms = now;
   t.schema = schemaName;
+  if (countOnly) return;
   const ch = [...channels.values()].find((c) => c.topic === topic);
   let msg;
   try {
