@@ -6,70 +6,12 @@
 
 mod common;
 
-use perturb_core::cloud::{Cloud, Datatype, PointField, PointLayout, names};
+use perturb_core::cloud::{Cloud, names};
 use perturb_core::formats::{kitti, pcd};
 use perturb_core::perturber::LidarPerturber;
 use perturb_core::registry::{Modality, of_modality};
 use perturb_core::sensor_model::{Axes, Axis, SensorModel};
 use rayon::prelude::*;
-use std::path::Path;
-use std::sync::Arc;
-
-/// The first PointCloud2 of a ROS 1 MCAP (the `ros1` profile: ROS 1 serialisation), decoded by
-/// hand (little-endian, u32 length prefixes), with its frame id.
-fn ros1_cloud(path: &Path) -> (Cloud, String) {
-    let bytes = std::fs::read(path).expect("read mcap");
-    for m in mcap::MessageStream::new(&bytes).expect("mcap") {
-        let m = m.expect("message");
-        let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
-        if schema != Some("sensor_msgs/PointCloud2") {
-            continue;
-        }
-        let d = &m.data[..];
-        let mut o = 0usize;
-        let mut u32_ = || {
-            let v = u32::from_le_bytes(d[o..o + 4].try_into().unwrap());
-            o += 4;
-            v
-        };
-        let (_seq, _sec, _nsec) = (u32_(), u32_(), u32_());
-        let len = u32_() as usize;
-        let frame = String::from_utf8(d[o..o + len].to_vec()).unwrap();
-        o += len;
-        let u32_ = |o: &mut usize| {
-            let v = u32::from_le_bytes(d[*o..*o + 4].try_into().unwrap());
-            *o += 4;
-            v
-        };
-        let height = u32_(&mut o);
-        let width = u32_(&mut o);
-        let nf = u32_(&mut o);
-        let mut fields = Vec::new();
-        for _ in 0..nf {
-            let l = u32_(&mut o) as usize;
-            let name = String::from_utf8(d[o..o + l].to_vec()).unwrap();
-            o += l;
-            let offset = u32_(&mut o);
-            let dt = d[o];
-            o += 1;
-            let count = u32_(&mut o);
-            let mut f = PointField::new(&name, offset, Datatype::from_code(dt).expect("datatype"));
-            f.count = count;
-            fields.push(f);
-        }
-        let big_endian = d[o] != 0;
-        o += 1;
-        let step = u32_(&mut o);
-        let row_step = u32_(&mut o);
-        let n = u32_(&mut o) as usize;
-        let data = d[o..o + n].to_vec();
-        let layout = Arc::new(PointLayout::new(fields, step, big_endian).unwrap());
-        let cloud =
-            Cloud::from_vec(layout, data, width, height, row_step as usize, true).expect("cloud");
-        return (cloud, frame);
-    }
-    panic!("no PointCloud2 in {}", path.display());
-}
 
 /// KITTI 000000 as nuScenes stores its clouds: x right, y forward, intensity 0..255, a ring.
 fn nuscenes_like(kitti_scan: &Cloud, sensor: &SensorModel) -> Cloud {
@@ -137,7 +79,7 @@ fn every_perturbation_keeps_positions_finite_and_intensity_within_the_scale() {
         clouds.push((f.into(), pcd::decode(&read(f)).unwrap().cloud, m));
     }
     // Ouster's `os1_lidar` frame has +x towards the connector, behind the sensor: -x forward.
-    let (ouster, frame) = ros1_cloud(&data.join("mcap_ouster_os1_pointcloudset/test.mcap"));
+    let (ouster, frame) = common::ros1_cloud(&data.join("mcap_ouster_os1_pointcloudset/test.mcap"));
     assert_eq!(frame, "os1_lidar");
     let ouster_model = SensorModel::vlp32c().with_axes(Axes::new(Axis::NegX, Axis::PosZ).unwrap());
     clouds.push((

@@ -63,75 +63,6 @@ fn kitti_scans(data: &std::path::Path) -> Vec<(&'static str, Cloud)> {
     .collect()
 }
 
-/// Detection retention of `id` at severities 1..3 over `scans`, as `perturb metrics lidar`
-/// computes it: every box the detector finds on the clean scan (all classes), matched one-to-one
-/// within 2 m in the ground plane to the boxes on the perturbed scan, pooled over the scans.
-fn detection_retention(id: &str, scans: &[(&str, Cloud, Vec<Box3>)]) -> [f64; 3] {
-    let sensor = SensorModel::hdl64e();
-    let mut det = Detector::new(DetectorConfig::default());
-    std::array::from_fn(|lvl| {
-        let mut total = DetectionMetrics {
-            retention: 1.0,
-            ..DetectionMetrics::default()
-        };
-        let mut p = LidarPerturber::new(id, lvl as u8 + 1, 1, sensor.clone()).unwrap();
-        for (seq, (_, cloud, base)) in scans.iter().enumerate() {
-            let out = p.apply_owned(&cloud.view(), seq as u64, None).unwrap();
-            let pts = Points::extract(&out.view(), &sensor, false).unwrap();
-            total.add(&detection_metrics(
-                base,
-                &det.detect(&pts),
-                &MatchConfig::default(),
-            ));
-        }
-        total.retention
-    })
-}
-
-#[test]
-fn fast_models_degrade_detection_more_than_physics() {
-    let Some(data) = common::shared_data("fast_models_degrade_detection_more_than_physics") else {
-        return;
-    };
-    let sensor = SensorModel::hdl64e();
-    let mut det = Detector::new(DetectorConfig::default());
-    let scans: Vec<(&str, Cloud, Vec<Box3>)> = kitti_scans(&data)
-        .into_iter()
-        .map(|(name, c)| {
-            let boxes = det.detect(&Points::extract(&c.view(), &sensor, false).unwrap());
-            (name, c, boxes)
-        })
-        .collect();
-    let fmt = |r: &[f64; 3]| format!("{:.3} / {:.3} / {:.3}", r[0], r[1], r[2]);
-    let mut failures = Vec::new();
-    for (fast, physics) in [
-        ("L-A4", &["L-A1"][..]),
-        ("L-A6", &["L-A5"][..]),
-        ("L-A9", &["L-A7", "L-A8"][..]),
-    ] {
-        let f = detection_retention(fast, &scans);
-        eprintln!("{fast}: detection retention s1..s3 {}", fmt(&f));
-        if !(f[0] > f[1] && f[1] > f[2]) {
-            failures.push(format!("{fast} does not fall with severity: {}", fmt(&f)));
-        }
-        for ph in physics {
-            let r = detection_retention(ph, &scans);
-            eprintln!("{ph}: detection retention s1..s3 {}", fmt(&r));
-            for l in 0..3 {
-                if f[l] >= r[l] {
-                    failures.push(format!(
-                        "{fast} s{}: retention {:.3} not below {ph}'s {:.3}",
-                        l + 1,
-                        f[l],
-                        r[l]
-                    ));
-                }
-            }
-        }
-    }
-    assert!(failures.is_empty(), "{}", failures.join("\n"));
-}
-
 #[test]
 fn fast_models_remove_the_expected_share_of_a_real_scan() {
     let Some(scan) = common::kitti_scan("fast_models_remove_the_expected_share_of_a_real_scan", 0)
@@ -264,4 +195,145 @@ fn lisa_returns_follow_the_model() {
         kept > scattered && scattered > 0,
         "kept {kept}, scattered {scattered}"
     );
+}
+
+/// Detection retention of `id` at severities 1..3 over `scans`, averaged over `seeds`
+/// (pooled over the scans per seed, as `perturb metrics lidar` pools them).
+fn mean_retention(id: &str, scans: &[(&str, Cloud, Vec<Box3>)], seeds: &[u64]) -> [f64; 3] {
+    use rayon::prelude::*;
+    let sensor = SensorModel::hdl64e();
+    let runs: Vec<(usize, f64)> = (0..3usize)
+        .flat_map(|lvl| seeds.iter().map(move |&s| (lvl, s)))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|(lvl, seed)| {
+            let mut det = Detector::new(DetectorConfig::default());
+            let mut total = DetectionMetrics {
+                retention: 1.0,
+                ..DetectionMetrics::default()
+            };
+            let mut p = LidarPerturber::new(id, lvl as u8 + 1, seed, sensor.clone()).unwrap();
+            for (seq, (_, cloud, base)) in scans.iter().enumerate() {
+                let out = p.apply_owned(&cloud.view(), seq as u64, None).unwrap();
+                let pts = Points::extract(&out.view(), &sensor, false).unwrap();
+                total.add(&detection_metrics(
+                    base,
+                    &det.detect(&pts),
+                    &MatchConfig::default(),
+                ));
+            }
+            (lvl, total.retention)
+        })
+        .collect();
+    std::array::from_fn(|lvl| {
+        let v: Vec<f64> = runs.iter().filter(|r| r.0 == lvl).map(|r| r.1).collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    })
+}
+
+#[test]
+fn every_weather_model_answers_its_severity_and_fast_ones_degrade_more() {
+    // Issue 33: the physics rain and snow's retention stayed flat within +-0.03 and moved up and
+    // down with the seed. Detection retention (every box the detector finds on the clean scan,
+    // matched within 2 m on the perturbed one, pooled over the shared KITTI scans, as `perturb
+    // metrics lidar` computes it), averaged over seeds 0..4, must not rise from severity 1 to 3;
+    // and from one severity to the next, except where the model's reference says why it
+    // does not (docs/lidar.md, "Weather and severity"): L-A1's light snow has more (small)
+    // flakes than its heavy snow (Marshall-Gunn), L-A3's flake count falls as the rate rises
+    // (Hahner's sampling, LiDAR_snow_sim issue 26), L-A5's extinction grows by 8e-4 / m from s2
+    // to s3. The lightweight models degrade detection more than their physics counterparts at
+    // every severity (the paper's RQ1 ranking).
+    let Some(data) =
+        common::shared_data("every_weather_model_answers_its_severity_and_fast_ones_degrade_more")
+    else {
+        return;
+    };
+    let sensor = SensorModel::hdl64e();
+    let mut det = Detector::new(DetectorConfig::default());
+    let scans: Vec<(&str, Cloud, Vec<Box3>)> = kitti_scans(&data)
+        .into_iter()
+        .map(|(name, c)| {
+            let boxes = det.detect(&Points::extract(&c.view(), &sensor, false).unwrap());
+            (name, c, boxes)
+        })
+        .collect();
+    let seeds = [0, 1, 2, 3, 4];
+    let fmt = |r: &[f64; 3]| format!("{:.3} / {:.3} / {:.3}", r[0], r[1], r[2]);
+    let ids = [
+        "L-A1", "L-A2", "L-A3", "L-A4", "L-A5", "L-A6", "L-A7", "L-A8", "L-A9", "L-A10",
+    ];
+    let table: std::collections::BTreeMap<&str, [f64; 3]> = ids
+        .iter()
+        .map(|&id| (id, mean_retention(id, &scans, &seeds)))
+        .collect();
+    let mut failures = Vec::new();
+    for (&id, r) in &table {
+        eprintln!("| {id} | {} |", fmt(r));
+        if r[2] > r[0] {
+            failures.push(format!("{id}: retention rises from s1 to s3: {}", fmt(r)));
+        }
+        let explained = matches!(id, "L-A1" | "L-A3" | "L-A5");
+        if !explained && (r[1] > r[0] || r[2] > r[1]) {
+            failures.push(format!("{id}: retention is not monotonic: {}", fmt(r)));
+        }
+    }
+    for (fast, physics) in [
+        ("L-A4", &["L-A1"][..]),
+        ("L-A6", &["L-A5"][..]),
+        ("L-A9", &["L-A7", "L-A8"][..]),
+    ] {
+        let f = table[fast];
+        if !(f[0] > f[1] && f[1] > f[2]) {
+            failures.push(format!(
+                "{fast} does not fall strictly with severity: {}",
+                fmt(&f)
+            ));
+        }
+        for ph in physics {
+            let r = table[ph];
+            for l in 0..3 {
+                if f[l] >= r[l] {
+                    failures.push(format!(
+                        "{fast} s{}: retention {:.3} not below {ph}'s {:.3}",
+                        l + 1,
+                        f[l],
+                        r[l]
+                    ));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn hahner_snow_drops_beams_without_a_return() {
+    // Issue 33: L-A2 and L-A3 kept beams with no return as zero-intensity points at exactly
+    // 0.10 m from the sensor (35-403 per KITTI frame). No flake closer than LISA's and Hahner's
+    // 0.9 m blind zone returns anything, so no output point may lie nearer than the nearest
+    // input point.
+    let Some(data) = common::shared_data("hahner_snow_drops_beams_without_a_return") else {
+        return;
+    };
+    let sensor = SensorModel::hdl64e();
+    for (name, scan) in kitti_scans(&data) {
+        let input = Points::extract(&scan.view(), &sensor, false).unwrap();
+        let nearest_in = (0..input.len())
+            .map(|i| input.range(i))
+            .fold(f32::INFINITY, f32::min);
+        for id in ["L-A2", "L-A3"] {
+            for severity in 1..=3 {
+                let mut p = LidarPerturber::new(id, severity, 3, sensor.clone()).unwrap();
+                let out = p.apply_owned(&scan.view(), 0, None).unwrap();
+                let o = Points::extract(&out.view(), &sensor, false).unwrap();
+                let too_near = (0..o.len())
+                    .filter(|&i| o.range(i) < nearest_in.min(0.9))
+                    .count();
+                assert_eq!(
+                    too_near, 0,
+                    "{name} {id} s{severity}: {too_near} points nearer than any input point"
+                );
+            }
+        }
+    }
 }

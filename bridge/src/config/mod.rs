@@ -67,7 +67,7 @@
 //! bind = "127.0.0.1"          # another address needs allow_remote = true
 //! port = 8765
 //! rate_hz = 10.0              # camera frames per second and side; clouds: cloud_rate_hz
-//! downscale = 2               # camera frames shrunk by this factor before JPEG
+//! max_width = 640             # camera frames shrunk by a whole factor to at most this width
 //!
 //! [[synthetic.camera]]        # street scene -> <stream>/raw
 //! stream = "camera_front"
@@ -581,8 +581,9 @@ pub struct ViewSection {
     pub rate_hz: f64,
     /// Point clouds per second and side sent to viewers.
     pub cloud_rate_hz: f64,
-    /// Camera frames are shrunk by this whole factor before JPEG encoding (1: full size).
-    pub downscale: u32,
+    /// Camera frames wider than this are shrunk by the smallest whole factor that makes them at
+    /// most this wide before JPEG encoding (1920x1208 -> 640x402, 800x503 -> 400x251).
+    pub max_width: u32,
     /// JPEG quality, 1..=100.
     pub jpeg_quality: u8,
     /// Clouds are thinned (every k-th point) to at most this many points.
@@ -607,7 +608,7 @@ impl Default for ViewSection {
             streams: Vec::new(),
             rate_hz: 10.0,
             cloud_rate_hz: 5.0,
-            downscale: 2,
+            max_width: 640,
             jpeg_quality: 75,
             max_points: 150_000,
             stats_interval_s: 1.0,
@@ -921,8 +922,8 @@ streams = ["camera_front", "lidar_top"]
         let c = parse(&format!("{cam}[view]\n")).unwrap();
         let v = c.view.unwrap();
         assert_eq!(
-            (v.bind.as_str(), v.port, v.downscale),
-            ("127.0.0.1", 8765, 2)
+            (v.bind.as_str(), v.port, v.max_width),
+            ("127.0.0.1", 8765, 640)
         );
         for ok in ["::1", "localhost", "127.0.0.2"] {
             assert!(
@@ -943,7 +944,7 @@ streams = ["camera_front", "lidar_top"]
         assert_eq!(e.key, "view.bind");
         for (key, bad) in [
             ("rate_hz", "0"),
-            ("downscale", "0"),
+            ("max_width", "8"),
             ("jpeg_quality", "101"),
             ("stats_interval_s", "0"),
             ("backlog", "0"),

@@ -485,7 +485,7 @@ impl Config {
                 Err((format!("view.{key}"), format!("{n} must be in {lo}..={hi}")))
             }
         };
-        whole("downscale", u64::from(v.downscale), 1, 16)?;
+        whole("max_width", u64::from(v.max_width), 16, 16_384)?;
         whole("jpeg_quality", u64::from(v.jpeg_quality), 1, 100)?;
         whole("max_points", u64::from(v.max_points), 1, 10_000_000)?;
         whole("backlog", v.backlog as u64, 1, 100_000)?;

@@ -1,7 +1,7 @@
 //! What the live view sends of a frame: a camera frame as a JPEG (through its 8-bit working view,
-//! shrunk by a whole factor), a point cloud as a `foxglove.PointCloud` over the same point bytes
-//! (thinned to a maximum number of points), a `camera_info` as a `foxglove.CameraCalibration`
-//! scaled to the JPEG's size.
+//! shrunk by a whole factor to a maximum width, encoded by `jpeg-encoder`), a point cloud as a
+//! `foxglove.PointCloud` over the same point bytes (thinned to a maximum number of points), a
+//! `camera_info` as a `foxglove.CameraCalibration` scaled to the JPEG's size.
 
 use crate::frame::Payload;
 use foxglove::schemas::packed_element_field::NumericType;
@@ -11,8 +11,7 @@ use foxglove::schemas::{
 use perturb_bag::dynamic::{MessageCodec, Value};
 use perturb_core::cloud::Datatype;
 use perturb_core::encoding::Scratch;
-use perturb_core::formats::picture;
-use perturb_core::image::{Image, resize_bilinear};
+use perturb_core::image::{Image, PixelFormat, resize_bilinear};
 
 /// Why a frame could not be shown.
 #[derive(Debug, thiserror::Error)]
@@ -34,6 +33,12 @@ pub enum FrameError {
     /// A calibration message that does not decode as `sensor_msgs/CameraInfo`.
     #[error("camera_info: {0}")]
     Calibration(String),
+    /// The JPEG encoder refused the frame.
+    #[error("JPEG: {0}")]
+    Jpeg(#[from] jpeg_encoder::EncodingError),
+    /// A frame too large for JPEG (65535 pixels a side).
+    #[error("{0}x{1} is too large for JPEG (65535 pixels a side): lower [view] max_width")]
+    TooLarge(u32, u32),
 }
 
 fn kind_name(p: &Payload<'_>) -> &'static str {
@@ -48,21 +53,32 @@ pub fn stamp(sec: i32, nanosec: u32) -> Timestamp {
     Timestamp::new(sec.max(0) as u32, nanosec.min(999_999_999))
 }
 
-/// A camera frame shrunk for the view, still borrowing nothing: its pixels (rgb8, bgr8, rgba8,
-/// bgra8 or mono8, as the working view), and its header.
+/// A camera frame shrunk for the view, borrowing nothing: its pixels (rgb8, bgr8, rgba8, bgra8
+/// or mono8, as the working view), the factor it was shrunk by, and its header.
 pub struct Shrunk {
     /// The pixels.
     pub image: Image,
+    /// Width and height were divided by it.
+    pub factor: u32,
     /// Header stamp.
     pub stamp: Timestamp,
     /// `frame_id`.
     pub frame_id: String,
 }
 
-/// Shrinks an image frame by `factor` (bilinear, through its 8-bit working view: Bayer, YUV and
-/// 16-bit frames are converted as the daemon converts them); the copy lets the shared-memory
-/// sample go before the JPEG is encoded.
-pub fn shrink(p: &Payload<'_>, factor: u32, scratch: &mut Scratch) -> Result<Shrunk, FrameError> {
+/// The smallest whole factor that brings `width` to at most `max_width`.
+pub fn factor(width: u32, max_width: u32) -> u32 {
+    width.div_ceil(max_width.max(1)).max(1)
+}
+
+/// Shrinks an image frame to at most `max_width` by a whole factor (bilinear, through its 8-bit
+/// working view: Bayer, YUV and 16-bit frames are converted as the daemon converts them); the
+/// copy lets the shared-memory sample go before the JPEG is encoded.
+pub fn shrink(
+    p: &Payload<'_>,
+    max_width: u32,
+    scratch: &mut Scratch,
+) -> Result<Shrunk, FrameError> {
     let Payload::Image(m) = p else {
         return Err(FrameError::WrongKind {
             want: "image",
@@ -71,10 +87,8 @@ pub fn shrink(p: &Payload<'_>, factor: u32, scratch: &mut Scratch) -> Result<Shr
     };
     let encoded = m.view()?;
     let work = scratch.to_working(&encoded);
-    let (w, h) = (
-        (work.width / factor.max(1)).max(1),
-        (work.height / factor.max(1)).max(1),
-    );
+    let factor = factor(work.width, max_width);
+    let (w, h) = ((work.width / factor).max(1), (work.height / factor).max(1));
     let image = if factor > 1 {
         resize_bilinear(&work, w, h)
     } else {
@@ -82,14 +96,29 @@ pub fn shrink(p: &Payload<'_>, factor: u32, scratch: &mut Scratch) -> Result<Shr
     };
     Ok(Shrunk {
         image,
+        factor,
         stamp: stamp(m.header.stamp_sec, m.header.stamp_nanosec),
         frame_id: m.header.frame_id.to_string(),
     })
 }
 
-/// The JPEG message of a shrunk frame at `quality`.
+/// The JPEG message of a shrunk frame at `quality` (alpha is dropped).
 pub fn jpeg(s: &Shrunk, quality: u8) -> Result<CompressedImage, FrameError> {
-    let data = picture::encode_jpeg(&s.image.view(), quality)?;
+    use jpeg_encoder::ColorType;
+    let img = &s.image;
+    let (w, h) = (
+        u16::try_from(img.width).map_err(|_| FrameError::TooLarge(img.width, img.height))?,
+        u16::try_from(img.height).map_err(|_| FrameError::TooLarge(img.width, img.height))?,
+    );
+    let color = match img.format {
+        PixelFormat::Rgb8 => ColorType::Rgb,
+        PixelFormat::Bgr8 => ColorType::Bgr,
+        PixelFormat::Rgba8 => ColorType::Rgba,
+        PixelFormat::Bgra8 => ColorType::Bgra,
+        PixelFormat::Mono8 => ColorType::Luma,
+    };
+    let mut data = Vec::with_capacity(img.data.len() / 8);
+    jpeg_encoder::Encoder::new(&mut data, quality.clamp(1, 100)).encode(&img.data, w, h, color)?;
     Ok(CompressedImage {
         timestamp: Some(s.stamp),
         frame_id: s.frame_id.clone(),
@@ -268,14 +297,18 @@ mod tests {
             image: street_image(801, 503, 0),
         };
         let mut scratch = Scratch::new();
-        let s = shrink(&p.payload(), 2, &mut scratch).unwrap();
-        assert_eq!((s.image.width, s.image.height), (400, 251));
+        let s = shrink(&p.payload(), 640, &mut scratch).unwrap();
+        assert_eq!((s.image.width, s.image.height, s.factor), (400, 251, 2));
         let j = jpeg(&s, 80).unwrap();
-        let back = picture::decode(&j.data).unwrap();
+        let back = perturb_core::formats::picture::decode(&j.data).unwrap();
         assert_eq!((back.width, back.height), (400, 251));
         assert_eq!((j.format.as_str(), j.frame_id.as_str()), ("jpeg", "cam"));
-        let full = shrink(&p.payload(), 1, &mut scratch).unwrap();
+        let full = shrink(&p.payload(), 801, &mut scratch).unwrap();
         assert_eq!((full.image.width, full.image.height), (801, 503));
+        assert_eq!(
+            (factor(1920, 640), factor(1921, 640), factor(10, 640)),
+            (3, 4, 1)
+        );
     }
 
     #[test]
@@ -298,7 +331,7 @@ mod tests {
         let kept = few.data.len() / few.point_stride as usize;
         assert!(kept <= 1000 && kept > 500, "{kept} of {n}");
         assert!(matches!(
-            shrink(&payload, 1, &mut Scratch::new()),
+            shrink(&payload, 640, &mut Scratch::new()),
             Err(FrameError::WrongKind { .. })
         ));
     }

@@ -3,8 +3,8 @@
 //! (`docs/live-view.md`):
 //!
 //! - per stream, raw beside perturbed: camera frames as JPEG (`/<stream>/raw/image`,
-//!   `/<stream>/perturbed/image`, `foxglove.CompressedImage`, at `rate_hz`, shrunk by
-//!   `downscale`), clouds as `foxglove.PointCloud` (`/<stream>/raw/points`, `.../perturbed/points`,
+//!   `/<stream>/perturbed/image`, `foxglove.CompressedImage`, at `rate_hz`, shrunk to at most
+//!   `max_width`), clouds as `foxglove.PointCloud` (`/<stream>/raw/points`, `.../perturbed/points`,
 //!   at `cloud_rate_hz`, thinned to `max_points`), the stream's `camera_info` when its ingress
 //!   relays one (`/<stream>/camera_info`, `foxglove.CameraCalibration`, scaled to the JPEG);
 //! - the events records (`/perturb/events`, JSON, `docs/events.schema.json`), the daemon's state
@@ -135,6 +135,20 @@ pub fn streams(
         .collect()
 }
 
+/// The view's topics of a stream (`side`: a frame side; `None`: the stream's own topics).
+pub fn topic(stream: &str, side: Option<Side>, kind: StreamKind) -> String {
+    match (side, kind) {
+        (Some(side), StreamKind::Image) => format!("/{stream}/{}/image", side.as_str()),
+        (Some(side), StreamKind::Cloud) => format!("/{stream}/{}/points", side.as_str()),
+        (None, _) => format!("/{stream}/stats"),
+    }
+}
+
+/// The topic of a camera stream's calibration.
+pub fn calibration_topic(stream: &str) -> String {
+    format!("/{stream}/camera_info")
+}
+
 /// What one stream side sends its frames on.
 enum Out {
     Image {
@@ -212,17 +226,15 @@ impl Adapter for View {
         let mut stats_channels = Vec::new();
         for ((stream, kind), (raw_c, pert_c)) in self.streams.iter().zip(&counters) {
             for (side, c) in [(Side::Raw, raw_c), (Side::Perturbed, pert_c)] {
-                let topic = |leaf: &str| format!("/{stream}/{}/{leaf}", side.as_str());
+                let frames = topic(stream, Some(side), *kind);
                 let (out, hz) = match kind {
                     StreamKind::Image => (
                         Out::Image {
-                            channel: ctx
-                                .channel_builder(topic("image"))
-                                .build::<CompressedImage>(),
+                            channel: ctx.channel_builder(&frames).build::<CompressedImage>(),
                             calibration: match (side, self.calibrations.get(stream)) {
                                 (Side::Raw, Some(link)) => Some((
                                     link.clone(),
-                                    ctx.channel_builder(format!("/{stream}/camera_info"))
+                                    ctx.channel_builder(calibration_topic(stream))
                                         .build::<CameraCalibration>(),
                                 )),
                                 _ => None,
@@ -231,7 +243,7 @@ impl Adapter for View {
                         self.cfg.rate_hz,
                     ),
                     StreamKind::Cloud => (
-                        Out::Cloud(ctx.channel_builder(topic("points")).build::<PointCloud>()),
+                        Out::Cloud(ctx.channel_builder(&frames).build::<PointCloud>()),
                         self.cfg.cloud_rate_hz,
                     ),
                 };
@@ -246,7 +258,7 @@ impl Adapter for View {
             }
             stats_channels.push(json_channel(
                 &ctx,
-                &format!("/{stream}/stats"),
+                &topic(stream, None, *kind),
                 "perturb.ViewStats",
                 stats::STATS_SCHEMA,
             )?);
@@ -381,7 +393,17 @@ impl Adapter for View {
             stop.store(true, Ordering::Relaxed);
             Ok(())
         })?;
-        server.stop().wait_blocking();
+        // A viewer that stopped reading keeps its connection's tasks waiting on a full socket:
+        // the server gets two seconds to close, then its tasks are dropped with the runtime.
+        let closed = runtime.block_on(async {
+            tokio::time::timeout(Duration::from_secs(2), server.stop().wait())
+                .await
+                .is_ok()
+        });
+        if !closed {
+            rep.notes
+                .push("the view's server did not close within 2 s (a viewer not reading)".into());
+        }
         runtime.shutdown_timeout(Duration::from_secs(2));
         for ((stream, _), (raw, pert)) in self.streams.iter().zip(&counters) {
             let n = |c: &SideCounters, f: fn(&SideCounters) -> &std::sync::atomic::AtomicU64| {
@@ -389,7 +411,6 @@ impl Adapter for View {
             };
             rep.received += n(raw, |c| &c.received) + n(pert, |c| &c.received);
             rep.forwarded += n(raw, |c| &c.shown) + n(pert, |c| &c.shown);
-            rep.dropped += n(raw, |c| &c.missed) + n(pert, |c| &c.missed);
             rep.bad += n(raw, |c| &c.failed) + n(pert, |c| &c.failed);
             rep.notes.push(format!(
                 "{stream}: {} raw and {} perturbed frames shown, {} and {} missed (view only)",
@@ -487,7 +508,9 @@ impl View {
             }
         };
         let mut last_seq = None;
-        let mut last_shown: Option<Instant> = None;
+        // When the next frame is due: one period after the last one was due (not after it was
+        // sent), so a 30 Hz stream shown at 10 Hz gets every third frame, not every fourth.
+        let mut next_due = Instant::now();
         let mut scratch = perturb_core::encoding::Scratch::new();
         let mut decoder: Option<frames::CalibrationDecoder> = None;
         let mut bad = 0u64;
@@ -514,12 +537,13 @@ impl View {
                 .skipped
                 .fetch_add(superseded, Ordering::Relaxed);
             let now = Instant::now();
-            let due = last_shown.is_none_or(|t| now.duration_since(t) >= job.period);
-            if !due || !job.out.has_sinks() {
+            // A quarter of a period early still counts (frames come on the sensor's grid).
+            if now + job.period / 4 < next_due || !job.out.has_sinks() {
                 job.counters.skipped.fetch_add(1, Ordering::Relaxed);
                 continue;
             }
-            last_shown = Some(now);
+            // After a pause (or from a source slower than the view) the schedule starts anew.
+            next_due = (next_due + job.period).max(now);
             let t0 = monotonic_ns();
             let sent = match &job.out {
                 Out::Image {
@@ -527,7 +551,7 @@ impl View {
                     calibration,
                 } => {
                     let shrunk =
-                        frames::shrink(&newest.payload(), self.cfg.downscale, &mut scratch);
+                        frames::shrink(&newest.payload(), self.cfg.max_width, &mut scratch);
                     drop(newest);
                     shrunk.and_then(|s| {
                         let msg = frames::jpeg(&s, self.cfg.jpeg_quality)?;
@@ -539,7 +563,7 @@ impl View {
                                 decoder = Some(frames::CalibrationDecoder::new()?);
                             }
                             let d = decoder.as_ref().expect("made above");
-                            ch.log(&d.calibration(&c, self.cfg.downscale)?);
+                            ch.log(&d.calibration(&c, s.factor)?);
                         }
                         Ok(())
                     })
@@ -558,6 +582,90 @@ impl View {
                     crate::stats::log_bad(&what, bad, &e);
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::Value;
+
+    /// The schema node a dotted field path leads to in `schema` (following `$ref`s to `$defs`).
+    fn field<'a>(schema: &'a Value, path: &str) -> Option<&'a Value> {
+        let mut node = schema;
+        for part in path.split('.') {
+            while let Some(r) = node["$ref"].as_str() {
+                node = &schema["$defs"][r.strip_prefix("#/$defs/")?];
+            }
+            node = node["properties"].get(part)?;
+        }
+        Some(node)
+    }
+
+    #[test]
+    fn the_layout_shows_topics_and_fields_the_view_sends() {
+        let layout: Value =
+            serde_json::from_str(include_str!("../../../config/foxglove-view-layout.json"))
+                .unwrap();
+        // config/bridge-synthetic.toml's streams, which `perturb demo` runs.
+        let mut topics = vec![
+            "/perturb/events".to_string(),
+            "/perturb/status".to_string(),
+            calibration_topic("camera_front"),
+        ];
+        for (stream, kind) in [
+            ("camera_front", StreamKind::Image),
+            ("lidar_top", StreamKind::Cloud),
+        ] {
+            topics.push(topic(stream, None, kind));
+            for side in [Side::Raw, Side::Perturbed] {
+                topics.push(topic(stream, Some(side), kind));
+            }
+        }
+        let stats: Value = serde_json::from_str(stats::STATS_SCHEMA).unwrap();
+        let mut seen = 0;
+        for (id, panel) in layout["configById"].as_object().unwrap() {
+            let mut named: Vec<&str> = ["imageTopic", "calibrationTopic"]
+                .iter()
+                .filter_map(|k| panel["imageMode"][*k].as_str())
+                .chain(panel["topicPath"].as_str())
+                .collect();
+            named.extend(
+                panel["topics"]
+                    .as_object()
+                    .into_iter()
+                    .flatten()
+                    .map(|(t, _)| t.as_str()),
+            );
+            for p in panel["paths"].as_array().into_iter().flatten() {
+                let path = p["value"].as_str().unwrap();
+                let (t, fields) = path.split_once('.').unwrap();
+                assert!(t.ends_with("/stats"), "{id}: {path}");
+                assert!(
+                    field(&stats, fields).is_some(),
+                    "{id}: {path}: no such field"
+                );
+                named.push(t);
+            }
+            for t in named {
+                assert!(topics.iter().any(|x| x == t), "{id}: the view sends no {t}");
+                seen += 1;
+            }
+        }
+        assert!(seen >= 10, "{seen} topics named");
+        let ids: Vec<String> = layout["configById"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .cloned()
+            .collect();
+        let tree = layout["layout"].to_string();
+        for id in ids {
+            assert!(
+                tree.contains(&format!("\"{id}\"")),
+                "{id} is not in the layout tree"
+            );
         }
     }
 }

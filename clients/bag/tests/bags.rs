@@ -76,12 +76,21 @@ fn reads_the_kitti_bag_in_log_time_order_and_decodes_its_sensors() {
 }
 
 fn write_sample(dir: &std::path::Path, compression: Compression) -> (Vec<Vec<u8>>, Vec<u64>) {
+    write_sample_at(dir, compression, 0)
+}
+
+/// [`write_sample`] at a compression level (0: the codec's default).
+fn write_sample_at(
+    dir: &std::path::Path,
+    compression: Compression,
+    level: u32,
+) -> (Vec<Vec<u8>>, Vec<u64>) {
     let mut w = BagWriter::create(
         dir,
         &WriterOptions {
             compression,
+            level,
             chunk_size: 64 << 10,
-            ..Default::default()
         },
     )
     .unwrap();
@@ -166,6 +175,79 @@ fn written_bags_read_back_identically_with_every_compression() {
         } else {
             eprintln!("kept {}", dir.display());
         }
+    }
+}
+
+/// True if python3 has the PyPI `mcap` reader (with its zstd and lz4 codecs) and `rosbags`; a
+/// skip with a message otherwise, a failure under `PERTURB_REQUIRE_ORACLES=1` (CI).
+fn have_python_readers() -> bool {
+    let ok = std::process::Command::new("python3")
+        .args([
+            "-c",
+            "import mcap.reader, zstandard, lz4.frame, rosbags.rosbag2",
+        ])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        let what = "the python packages mcap and rosbags (pip install mcap rosbags)";
+        assert!(
+            std::env::var("PERTURB_REQUIRE_ORACLES").as_deref() != Ok("1"),
+            "{what} are missing and PERTURB_REQUIRE_ORACLES=1"
+        );
+        eprintln!("SKIP: {what} are missing");
+    }
+    ok
+}
+
+#[test]
+fn compressed_bags_read_back_with_the_mcap_package_and_rosbags() {
+    use sha2::{Digest, Sha256};
+    if !have_python_readers() {
+        return;
+    }
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/read_mcap.py");
+    for (compression, level, name) in [
+        (Compression::Zstd, 1, "zstd"),
+        (Compression::Zstd, 0, "zstd"),
+        (Compression::Zstd, 19, "zstd"),
+        (Compression::Lz4, 0, "lz4"),
+        (Compression::None, 0, ""),
+    ] {
+        let dir = tmp(&format!("py-{compression:?}-{level}"));
+        let (payloads, times) = write_sample_at(&dir, compression, level);
+        let o = std::process::Command::new("python3")
+            .arg(&script)
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{name} {level}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["compression"], serde_json::json!([name]), "{level}: {v}");
+        let want: Vec<serde_json::Value> = payloads
+            .iter()
+            .zip(&times)
+            .enumerate()
+            .map(|(k, (p, t))| {
+                let topic = if k % 2 == 0 {
+                    "/cam/image_raw"
+                } else {
+                    "/lidar/points"
+                };
+                serde_json::json!([topic, t, hex::encode(Sha256::digest(p))])
+            })
+            .collect();
+        for reader in ["mcap", "rosbags"] {
+            assert_eq!(
+                v[reader].as_array().unwrap(),
+                &want,
+                "{name} level {level}: what {reader} read"
+            );
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
 

@@ -40,7 +40,7 @@ pub struct Args {
     /// Frame sequence number (animated effects and per-frame noise depend on it).
     #[arg(long, default_value_t = 0)]
     seq: u64,
-    /// LiDAR sensor model: vlp32c, vlp16, hdl32e, hdl64e (default: hdl64e for KITTI .bin, vlp32c otherwise).
+    /// LiDAR sensor model: vlp32c, vlp16, hdl32e, hdl64e (default: hdl64e for KITTI .bin, hdl32e for nuScenes .pcd.bin, vlp32c otherwise).
     #[arg(long)]
     sensor: Option<String>,
     /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).

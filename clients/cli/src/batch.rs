@@ -51,7 +51,7 @@ pub struct Args {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
+    /// LiDAR sensor model (default: hdl64e for KITTI .bin, hdl32e for nuScenes .pcd.bin, vlp32c otherwise).
     #[arg(long)]
     pub sensor: Option<String>,
     /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).

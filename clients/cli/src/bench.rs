@@ -62,7 +62,7 @@ pub struct Args {
     /// Budget in milliseconds (default 33 for camera, 200 for LiDAR).
     #[arg(long)]
     budget_ms: Option<f64>,
-    /// LiDAR sensor model (default: hdl64e for KITTI .bin, vlp32c otherwise).
+    /// LiDAR sensor model (default: hdl64e for KITTI .bin, hdl32e for nuScenes .pcd.bin, vlp32c otherwise).
     #[arg(long)]
     sensor: Option<String>,
     /// LiDAR forward axis: +x, -x, +y or -y (default: +y for nuScenes .pcd.bin, +x otherwise).

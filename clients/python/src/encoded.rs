@@ -4,7 +4,7 @@
 //! them in the frame's own encoding, size, step and byte order, byte-identical to perturbd and
 //! `perturb apply` on a bag for the same ID, severity, seed and sequence number.
 
-use super::{detach, perr, spec};
+use super::{Count, Seed, Seq, Severity, detach, perr, spec};
 use perturb_core::encoding::{ENCODINGS, EncodedView, Layout, Scratch};
 use perturb_core::perturber::CameraPerturber;
 use pyo3::prelude::*;
@@ -46,8 +46,11 @@ pub fn encodings(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
 /// unsupported encoding, a Bayer frame of odd size, a short step or data) raises PerturbError
 /// naming the field and its value.
 #[pyfunction]
-#[pyo3(signature = (data, encoding, width, height, step, id, severity, seed = 0, seq = 0, *,
-    is_bigendian = 0, bit_depth = None))]
+#[pyo3(
+    signature = (data, encoding, width, height, step, id, severity, seed = Count(0),
+        seq = Count(0), *, is_bigendian = 0, bit_depth = None),
+    text_signature = "(data, encoding, width, height, step, id, severity, seed=0, seq=0, *, is_bigendian=0, bit_depth=None)"
+)]
 #[allow(clippy::too_many_arguments)]
 pub fn apply_encoded<'py>(
     py: Python<'py>,
@@ -57,13 +60,13 @@ pub fn apply_encoded<'py>(
     height: u32,
     step: usize,
     id: &str,
-    severity: i64,
-    seed: u64,
-    seq: u64,
+    severity: Severity,
+    seed: Seed,
+    seq: Seq,
     is_bigendian: u8,
     bit_depth: Option<u8>,
 ) -> PyResult<Bound<'py, PyBytes>> {
-    let spec = spec(id, severity, seed)?;
+    let (spec, seq) = (spec(id, &severity, seed)?, seq.0);
     let mut view =
         EncodedView::from_ros(data, width, height, step, encoding, is_bigendian).map_err(perr)?;
     if let Some(bits) = bit_depth {

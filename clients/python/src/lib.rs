@@ -25,7 +25,7 @@ use numpy::{
     PyUntypedArrayMethods,
 };
 use perturb_core::cloud::{Datatype, PointField, PointLayout};
-use perturb_core::detector::{Detector, DetectorConfig, points_in_boxes};
+use perturb_core::detector::{Detector, DetectorConfig, ObjectClass, points_in_boxes};
 use perturb_core::image::{Image, ImageView, ImageViewMut, PixelFormat};
 use perturb_core::lidar::Points;
 use perturb_core::perturber::{self as core, Spec};
@@ -36,7 +36,7 @@ use perturb_study::dataset::Dataset;
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyBool, PyDict, PyInt, PyList};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -60,17 +60,186 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Checks `severity` against the range of `id` without truncating it to a byte first.
-fn spec(id: &str, severity: i64, seed: u64) -> PyResult<Spec> {
+/// An integer argument `name` (a Python `int`, not a `bool`, a `float` or a `str`), or a
+/// `PerturbError` naming the argument and what it got. Larger than any i128: `None` (out of the
+/// range of every argument).
+fn int_arg(obj: Borrowed<'_, '_, PyAny>, name: &str) -> PyResult<Option<i128>> {
+    let is_int = obj.is_instance_of::<PyInt>() && !obj.is_instance_of::<PyBool>();
+    if !is_int {
+        return Err(perr(format!(
+            "{name} must be an integer, got {} {}",
+            type_name(&obj.to_owned()),
+            repr(obj)
+        )));
+    }
+    Ok(obj.extract::<i128>().ok())
+}
+
+/// `repr(obj)`, or `?`.
+fn repr(obj: Borrowed<'_, '_, PyAny>) -> String {
+    obj.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+}
+
+/// A `seed` or `seq` argument: an integer in 0..2**64 (any other value raises `PerturbError`
+/// naming the argument).
+#[derive(Clone, Copy, Debug)]
+struct Count<const SEQ: bool>(u64);
+
+/// The `seed` argument.
+type Seed = Count<false>;
+/// The `seq` argument (frame sequence number).
+type Seq = Count<true>;
+
+impl<'a, 'py, const SEQ: bool> FromPyObject<'a, 'py> for Count<SEQ> {
+    type Error = PyErr;
+
+    fn extract(obj: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        let name = if SEQ { "seq" } else { "seed" };
+        let v = int_arg(obj, name)?;
+        v.and_then(|v| u64::try_from(v).ok())
+            .map(Count)
+            .ok_or_else(|| {
+                perr(format!(
+                    "{name} must be an integer in 0..2**64, got {}",
+                    repr(obj)
+                ))
+            })
+    }
+}
+
+/// The `severity` argument: an integer, checked against the perturbation's range by [`spec`].
+#[derive(Clone, Debug)]
+struct Severity {
+    value: Option<i128>,
+    shown: String,
+}
+
+impl<'a, 'py> FromPyObject<'a, 'py> for Severity {
+    type Error = PyErr;
+
+    fn extract(obj: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        Ok(Severity {
+            value: int_arg(obj, "severity")?,
+            shown: repr(obj),
+        })
+    }
+}
+
+/// The perturbation of `id` at `severity` with `seed` (the severity checked against the range of
+/// `id` without truncating it to a byte first).
+fn spec(id: &str, severity: &Severity, seed: Seed) -> PyResult<Spec> {
     let entry = registry::find(id).map_err(perr)?;
-    match u8::try_from(severity) {
-        Ok(s) => Spec::new(entry.id, s, seed).map_err(perr),
-        Err(_) => Err(perr(format!(
-            "severity {severity} is out of range for {}: valid severities are 1..={}",
+    match severity.value.and_then(|s| u8::try_from(s).ok()) {
+        Some(s) => Spec::new(entry.id, s, seed.0).map_err(perr),
+        None => Err(perr(format!(
+            "severity {} is out of range for {}: valid severities are 1..={}",
+            severity.shown,
             entry.id,
             entry.max_severity()
         ))),
     }
+}
+
+/// The `severities` argument: a list of integers in 1..=255 (the selection then keeps those
+/// each perturbation has).
+fn severity_list(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<u8>> {
+    let Some(o) = obj.filter(|o| !o.is_none()) else {
+        return Ok(Vec::new());
+    };
+    let items = o.try_iter().map_err(|_| {
+        perr(format!(
+            "severities must be a list of integers, got {} {}",
+            type_name(o),
+            repr(o.as_borrowed())
+        ))
+    })?;
+    items
+        .map(|item| {
+            let item = item?;
+            int_arg(item.as_borrowed(), "severities")?
+                .and_then(|v| u8::try_from(v).ok())
+                .filter(|&v| v >= 1)
+                .ok_or_else(|| {
+                    perr(format!(
+                        "severities: {} is not a severity (1..=5 for camera, 1..=3 for LiDAR)",
+                        repr(item.as_borrowed())
+                    ))
+                })
+        })
+        .collect()
+}
+
+/// An optional `str` argument (None when absent or `None`).
+fn opt_str(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<String>> {
+    match obj {
+        None => Ok(None),
+        Some(o) if o.is_none() => Ok(None),
+        Some(o) => o.extract::<String>().map(Some).map_err(|_| {
+            perr(format!(
+                "{name} must be a str, got {} {}",
+                type_name(o),
+                repr(o.as_borrowed())
+            ))
+        }),
+    }
+}
+
+/// An optional number argument (an `int` or a `float`, not a `bool`).
+fn opt_f32(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<f32>> {
+    match obj {
+        None => Ok(None),
+        Some(o) if o.is_none() => Ok(None),
+        Some(o) if !o.is_instance_of::<PyBool>() && o.extract::<f64>().is_ok() => {
+            Ok(Some(o.extract::<f64>()? as f32))
+        }
+        Some(o) => Err(perr(format!(
+            "{name} must be a number, got {} {}",
+            type_name(o),
+            repr(o.as_borrowed())
+        ))),
+    }
+}
+
+/// An optional list of `str` argument.
+fn opt_strs(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Vec<String>>> {
+    match obj {
+        None => Ok(None),
+        Some(o) if o.is_none() => Ok(None),
+        Some(o) if !o.is_instance_of::<pyo3::types::PyString>() => {
+            o.extract::<Vec<String>>().map(Some).map_err(|_| {
+                perr(format!(
+                    "{name} must be a list of str, got {} {}",
+                    type_name(o),
+                    repr(o.as_borrowed())
+                ))
+            })
+        }
+        Some(o) => Err(perr(format!(
+            "{name} must be a list of str, got the str {}",
+            repr(o.as_borrowed())
+        ))),
+    }
+}
+
+/// A `bool` argument.
+fn flag(obj: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<bool> {
+    match obj {
+        None => Ok(false),
+        Some(o) => o.cast::<PyBool>().map(|b| b.is_true()).map_err(|_| {
+            perr(format!(
+                "{name} must be True or False, got {} {}",
+                type_name(o),
+                repr(o.as_borrowed())
+            ))
+        }),
+    }
+}
+
+/// The type name of `obj`.
+fn type_name(obj: &Bound<'_, PyAny>) -> String {
+    obj.get_type()
+        .name()
+        .map_or_else(|_| "?".into(), |n| n.to_string())
 }
 
 /// `numpy.<name>(obj)`.
@@ -309,7 +478,7 @@ impl<T> Pool<T> {
 /// (mono8) uint8 array; `p.apply_(image, seq=0)` perturbs it in place. The output is a pure
 /// function of (image, ID, severity, seed, seq), byte-identical to `perturb apply` and the
 /// daemon. Safe to call from many threads; the GIL is released during the work.
-#[pyclass(module = "perturb._perturb", frozen)]
+#[pyclass(module = "perturb._perturb", frozen, subclass)]
 struct CameraPerturber {
     spec: Spec,
     pool: Pool<core::CameraPerturber>,
@@ -318,9 +487,9 @@ struct CameraPerturber {
 #[pymethods]
 impl CameraPerturber {
     #[new]
-    #[pyo3(signature = (id, severity, seed = 0))]
-    fn new(id: &str, severity: i64, seed: u64) -> PyResult<Self> {
-        let spec = spec(id, severity, seed)?;
+    #[pyo3(signature = (id, severity, seed = Count(0)), text_signature = "(id, severity, seed=0)")]
+    fn new(id: &str, severity: Severity, seed: Seed) -> PyResult<Self> {
+        let spec = spec(id, &severity, seed)?;
         // Validates the modality now rather than on the first frame.
         let first = core::CameraPerturber::from_spec(spec).map_err(perr)?;
         let pool = Pool::new();
@@ -331,16 +500,18 @@ impl CameraPerturber {
     /// Returns the perturbed copy of `image` (frame sequence number `seq`). `format` names the
     /// pixel order of a 3- or 4-channel array (`rgb8` default, `bgr8` for OpenCV images,
     /// `rgba8`, `bgra8`).
-    #[pyo3(signature = (image, seq = 0, *, format = None))]
+    #[pyo3(signature = (image, seq = Count(0), *, format = None))]
     // numpy arrays: uninitialised output arrays and their slices.
     #[allow(unsafe_code)]
     fn __call__<'py>(
         &self,
         py: Python<'py>,
         image: &Bound<'py, PyAny>,
-        seq: u64,
-        format: Option<&str>,
+        seq: Seq,
+        format: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArrayDyn<u8>>> {
+        let format = opt_str(format, "format")?;
+        let (seq, format) = (seq.0, format.as_deref());
         let input = image_in(image, format)?;
         let shape = input.array.shape().to_vec();
         // Not zeroed: every perturbation writes every byte of its output (the camera contract),
@@ -375,16 +546,22 @@ impl CameraPerturber {
 
     /// Perturbs `image` in place (it must be writable) and returns it. The frame is perturbed
     /// into a scratch buffer and copied back (one copy of the frame).
-    #[pyo3(signature = (image, seq = 0, *, format = None))]
+    #[pyo3(
+        signature = (image, seq = Count(0), *, format = None),
+        text_signature = "(self, image, seq=0, *, format=None)"
+    )]
     // numpy arrays: uninitialised output arrays and their slices.
     #[allow(unsafe_code)]
     fn apply_<'py>(
         &self,
         py: Python<'py>,
         image: &Bound<'py, PyAny>,
-        seq: u64,
-        format: Option<&str>,
+        seq: Seq,
+        format: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let format_arg = format;
+        let format = opt_str(format, "format")?;
+        let format = format.as_deref();
         let a = image
             .cast::<PyUntypedArray>()
             .map_err(|_| perr("apply_ perturbs a numpy array in place; got another object"))?;
@@ -392,7 +569,7 @@ impl CameraPerturber {
         let spec = self.spec;
         if !layout.packed {
             // Strides the core cannot address: perturb a contiguous copy and assign it back.
-            let out = self.__call__(py, image, seq, format)?;
+            let out = self.__call__(py, image, seq, format_arg)?;
             image.set_item(pyo3::types::PyEllipsis::get(py), out)?;
             return Ok(image.clone());
         }
@@ -417,7 +594,7 @@ impl CameraPerturber {
                 self.pool
                     .with(
                         || core::CameraPerturber::from_spec(spec),
-                        |p| p.apply(&view, &mut scratch.view_mut(), seq),
+                        |p| p.apply(&view, &mut scratch.view_mut(), seq.0),
                     )?
                     .map_err(perr)?;
             }
@@ -577,19 +754,39 @@ fn cloud_view<'a>(
     .map_err(perr)
 }
 
-/// The sensor model from a name and intensity scale, as `perturb apply` reads them.
-fn sensor_model(sensor: Option<&str>, intensity_max: Option<f32>) -> PyResult<SensorModel> {
-    perturb_study::files::sensor_for(None, sensor, None, intensity_max).map_err(perr)
+/// The sensor model from a name, a forward axis and an intensity scale, as `perturb apply` reads
+/// them for a cloud of `kind` (`None`: an array, read like a file of no known kind: VLP-32C, x
+/// forward).
+fn sensor_model(
+    kind: Option<perturb_core::formats::FileKind>,
+    sensor: Option<&Bound<'_, PyAny>>,
+    forward: Option<&Bound<'_, PyAny>>,
+    intensity_max: Option<&Bound<'_, PyAny>>,
+) -> PyResult<SensorModel> {
+    let sensor = opt_str(sensor, "sensor")?;
+    let forward = opt_str(forward, "forward")?;
+    let intensity_max = opt_f32(intensity_max, "intensity_max")?;
+    if let Some(f) = &forward {
+        use perturb_core::sensor_model::{Axes, Axis};
+        Axis::parse(f)
+            .and_then(|a| Axes::new(a, Axis::PosZ))
+            .map_err(|e| perr(format!("forward: {e}")))?;
+    }
+    perturb_study::files::sensor_for(kind, sensor.as_deref(), forward.as_deref(), intensity_max)
+        .map_err(perr)
 }
 
 /// A LiDAR perturbation configured by ID (or name), severity, seed and sensor model.
 ///
 /// `p(points, seq=0)` returns the perturbed copy of an (N, k) float32 array (x, y, z, intensity,
 /// then extra columns, carried through). Points may be removed or added: the output has N' rows.
-/// `sensor` is the LiDAR model (vlp32c by default, vlp16, hdl32e, hdl64e: KITTI is hdl64e) and
-/// `intensity_max` its intensity scale (1 or 255). `fields` names the columns (default x, y, z,
-/// intensity, c4, ...; name a column `ring` to give the laser index, as in nuScenes `.pcd.bin`).
-#[pyclass(module = "perturb._perturb", frozen)]
+/// `sensor` is the LiDAR model (vlp32c by default, vlp16, hdl32e, hdl64e: KITTI is hdl64e),
+/// `intensity_max` its intensity scale (1 or 255) and `forward` the axis its frame looks along
+/// (`+x` by default as in ROS and KITTI; `+y` for nuScenes' LIDAR_TOP): every direction-dependent
+/// perturbation (the field of view, shifts, motion, object boxes) works in the vehicle's frame.
+/// `fields` names the columns (default x, y, z, intensity, c4, ...; name a column `ring` to give
+/// the laser index, as in nuScenes `.pcd.bin`).
+#[pyclass(module = "perturb._perturb", frozen, subclass)]
 struct LidarPerturber {
     spec: Spec,
     sensor: SensorModel,
@@ -600,17 +797,22 @@ struct LidarPerturber {
 #[pymethods]
 impl LidarPerturber {
     #[new]
-    #[pyo3(signature = (id, severity, seed = 0, sensor = None, intensity_max = None, *, fields = None))]
+    #[pyo3(
+        signature = (id, severity, seed = Count(0), sensor = None, intensity_max = None, *, fields = None, forward = None),
+        text_signature = "(id, severity, seed=0, sensor=None, intensity_max=None, *, fields=None, forward=None)"
+    )]
     fn new(
         id: &str,
-        severity: i64,
-        seed: u64,
-        sensor: Option<&str>,
-        intensity_max: Option<f32>,
-        fields: Option<Vec<String>>,
+        severity: Severity,
+        seed: Seed,
+        sensor: Option<&Bound<'_, PyAny>>,
+        intensity_max: Option<&Bound<'_, PyAny>>,
+        fields: Option<&Bound<'_, PyAny>>,
+        forward: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let spec = spec(id, severity, seed)?;
-        let sensor = sensor_model(sensor, intensity_max)?;
+        let spec = spec(id, &severity, seed)?;
+        let sensor = sensor_model(None, sensor, forward, intensity_max)?;
+        let fields = opt_strs(fields, "fields")?;
         let first = core::LidarPerturber::from_spec(spec, sensor.clone()).map_err(perr)?;
         let pool = Pool::new();
         lock(&pool.free).push(first);
@@ -623,15 +825,16 @@ impl LidarPerturber {
     }
 
     /// Returns the perturbed copy of `points` (frame sequence number `seq`).
-    #[pyo3(signature = (points, seq = 0))]
+    #[pyo3(signature = (points, seq = Count(0)))]
     // numpy arrays: uninitialised output arrays and their slices.
     #[allow(unsafe_code)]
     fn __call__<'py>(
         &self,
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
-        seq: u64,
+        seq: Seq,
     ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let seq = seq.0;
         let input = cloud_in(points)?;
         let layout = cloud_layout(&column_names(self.fields.as_deref(), input.k)?)?;
         let view = cloud_view(&layout, input.bytes(), input.n)?;
@@ -693,13 +896,26 @@ impl LidarPerturber {
         self.sensor.name
     }
 
+    /// The axis the sensor's frame looks along (`+x`, `-x`, `+y` or `-y`).
+    #[getter]
+    fn forward(&self) -> String {
+        self.sensor.axes.forward.to_string()
+    }
+
+    /// The intensity full scale (1 or 255).
+    #[getter]
+    fn intensity_max(&self) -> f32 {
+        self.sensor.intensity_max
+    }
+
     fn __repr__(&self) -> String {
         format!(
-            "LidarPerturber('{}', {}, seed={}, sensor='{}')  # {}",
+            "LidarPerturber('{}', {}, seed={}, sensor='{}', forward='{}')  # {}",
             self.spec.entry.id,
             self.spec.severity,
             self.spec.seed,
             self.sensor.name,
+            self.sensor.axes.forward,
             self.spec.entry.name
         )
     }
@@ -707,39 +923,60 @@ impl LidarPerturber {
 
 /// The clustering detector's boxes on `points` (an (N, k) float32 array), as `perturb detect
 /// --json` prints them: a list of dicts with `center` (x, y, z), `size` (length, width, height),
-/// `yaw` (radians) and `points` (scan points inside the box). `objects=True` drops clusters too
-/// large to be a road user (`perturb detect --objects`).
+/// `yaw` (radians about +z), `class` (`vehicle`, `pedestrian` or `other`) and `points` (scan
+/// points inside the box), in the cloud's own frame. `sensor`, `forward` and `intensity_max` say
+/// how to read the cloud, as for `LidarPerturber` (the detector works in the vehicle's frame and
+/// takes its clustering radii from the sensor's beam spacing). `objects=True` keeps only road
+/// users (`perturb detect --objects`); `class_="vehicle"` only one class (`--class`).
 #[pyfunction]
-#[pyo3(signature = (points, *, objects = false, fields = None))]
+#[pyo3(
+    signature = (points, *, objects = None, fields = None, sensor = None, forward = None,
+        intensity_max = None, class_ = None),
+    text_signature = "(points, *, objects=False, fields=None, sensor=None, forward=None, intensity_max=None, class_=None)"
+)]
+#[allow(clippy::too_many_arguments)]
 fn detect<'py>(
     py: Python<'py>,
     points: &Bound<'py, PyAny>,
-    objects: bool,
-    fields: Option<Vec<String>>,
+    objects: Option<&Bound<'py, PyAny>>,
+    fields: Option<&Bound<'py, PyAny>>,
+    sensor: Option<&Bound<'py, PyAny>>,
+    forward: Option<&Bound<'py, PyAny>>,
+    intensity_max: Option<&Bound<'py, PyAny>>,
+    class_: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
+    let objects = flag(objects, "objects")?;
+    let fields = opt_strs(fields, "fields")?;
+    let sensor = sensor_model(None, sensor, forward, intensity_max)?;
+    let config = match opt_str(class_, "class_")? {
+        Some(c) => {
+            DetectorConfig::only(ObjectClass::parse(&c).map_err(|e| perr(format!("class_: {e}")))?)
+        }
+        None if objects => DetectorConfig::objects(),
+        None => DetectorConfig::default(),
+    };
     let input = cloud_in(points)?;
     let layout = cloud_layout(&column_names(fields.as_deref(), input.k)?)?;
     let view = cloud_view(&layout, input.bytes(), input.n)?;
-    let (boxes, counts) = detach(py, || -> perturb_core::Result<_> {
-        let p = Points::extract(&view, &SensorModel::default(), false)?;
-        let config = if objects {
-            DetectorConfig::objects()
-        } else {
-            DetectorConfig::default()
-        };
-        let boxes = Detector::new(config).detect(&p);
+    let (found, counts) = detach(py, || -> perturb_core::Result<_> {
+        let p = Points::extract(&view, &sensor, false)?;
+        let found = Detector::new(config).detect_classified(&p);
+        let boxes: Vec<_> = found.iter().map(|d| d.bbox).collect();
         let counts = points_in_boxes(&p, &boxes);
-        Ok((boxes, counts))
+        Ok((found, counts))
     })
     .map_err(perr)?;
     let out = PyList::empty(py);
-    for (b, n) in boxes.iter().zip(counts) {
-        let d = PyDict::new(py);
-        d.set_item("center", (b.center[0], b.center[1], b.center[2]))?;
-        d.set_item("size", (b.size[0], b.size[1], b.size[2]))?;
-        d.set_item("yaw", b.yaw)?;
-        d.set_item("points", n)?;
-        out.append(d)?;
+    for (d, n) in found.iter().zip(counts) {
+        // In the cloud's own frame, as `perturb detect` prints them.
+        let b = d.bbox.to_sensor(&sensor.axes);
+        let o = PyDict::new(py);
+        o.set_item("center", (b.center[0], b.center[1], b.center[2]))?;
+        o.set_item("size", (b.size[0], b.size[1], b.size[2]))?;
+        o.set_item("yaw", b.yaw)?;
+        o.set_item("class", d.class.as_str())?;
+        o.set_item("points", n)?;
+        out.append(o)?;
     }
     Ok(out)
 }
@@ -793,22 +1030,38 @@ fn input_is_copied(array: &Bound<'_, PyAny>, cloud: bool) -> PyResult<bool> {
 /// number), `modality`, `sets` and `todo` (lists of (id, severity, directory)). Only folders of
 /// images or point clouds (a bag goes through `perturb batch`).
 #[pyfunction]
-#[pyo3(signature = (input, out, *, ids = Vec::new(), families = Vec::new(), modality = None,
-    severities = Vec::new(), seed = 0, sensor = None, intensity_max = None, shard = None))]
+#[pyo3(
+    signature = (input, out, *, ids = None, families = None, modality = None,
+        severities = None, seed = Count(0), sensor = None, intensity_max = None, shard = None,
+        forward = None),
+    text_signature = "(input, out, *, ids=None, families=None, modality=None, severities=None, seed=0, sensor=None, intensity_max=None, shard=None, forward=None)"
+)]
 #[allow(clippy::too_many_arguments)]
 fn plan_batch<'py>(
     py: Python<'py>,
     input: PathBuf,
     out: PathBuf,
-    ids: Vec<String>,
-    families: Vec<String>,
-    modality: Option<&str>,
-    severities: Vec<u8>,
-    seed: u64,
-    sensor: Option<String>,
-    intensity_max: Option<f32>,
-    shard: Option<&str>,
+    ids: Option<&Bound<'py, PyAny>>,
+    families: Option<&Bound<'py, PyAny>>,
+    modality: Option<&Bound<'py, PyAny>>,
+    severities: Option<&Bound<'py, PyAny>>,
+    seed: Seed,
+    sensor: Option<&Bound<'py, PyAny>>,
+    intensity_max: Option<&Bound<'py, PyAny>>,
+    shard: Option<&Bound<'py, PyAny>>,
+    forward: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let ids = opt_strs(ids, "ids")?.unwrap_or_default();
+    let families = opt_strs(families, "families")?.unwrap_or_default();
+    let modality = opt_str(modality, "modality")?;
+    let severities = severity_list(severities)?;
+    let (seed, sensor) = (seed.0, opt_str(sensor, "sensor")?);
+    let forward = opt_str(forward, "forward")?;
+    let intensity_max = opt_f32(intensity_max, "intensity_max")?;
+    let shard = opt_str(shard, "shard")?;
+    // Checked now, with the input kind's defaults, as `perturb batch` checks them.
+    perturb_study::files::sensor_for(None, sensor.as_deref(), forward.as_deref(), intensity_max)
+        .map_err(perr)?;
     let opts = BatchOptions {
         input: input.clone(),
         out: out.clone(),
@@ -820,7 +1073,7 @@ fn plan_batch<'py>(
         },
         seed,
         sensor,
-        forward: None,
+        forward,
         intensity_max,
         topics: Vec::new(),
         lidar_metrics: false,
@@ -895,26 +1148,28 @@ impl BatchWorker {
     /// `root` is the dataset folder, `first_file` its first file (relative; it decides the default
     /// sensor model of point clouds as in `perturb batch`).
     #[new]
-    #[pyo3(signature = (root, first_file, seed = 0, sensor = None, intensity_max = None))]
+    #[pyo3(
+        signature = (root, first_file, seed = Count(0), sensor = None, intensity_max = None,
+            forward = None),
+        text_signature = "(root, first_file, seed=0, sensor=None, intensity_max=None, forward=None)"
+    )]
     fn new(
         root: PathBuf,
         first_file: PathBuf,
-        seed: u64,
-        sensor: Option<&str>,
-        intensity_max: Option<f32>,
+        seed: Seed,
+        sensor: Option<&Bound<'_, PyAny>>,
+        intensity_max: Option<&Bound<'_, PyAny>>,
+        forward: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let kind = perturb_core::formats::FileKind::from_path(&first_file).map_err(perr)?;
         let sensor = if kind.is_image() {
             None
         } else {
-            Some(
-                perturb_study::files::sensor_for(Some(kind), sensor, None, intensity_max)
-                    .map_err(perr)?,
-            )
+            Some(sensor_model(Some(kind), sensor, forward, intensity_max)?)
         };
         Ok(BatchWorker {
             root,
-            seed,
+            seed: seed.0,
             sensor,
             workers: Mutex::new(HashMap::new()),
         })

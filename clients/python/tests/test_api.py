@@ -20,6 +20,8 @@ def test_errors_are_perturb_errors_with_the_core_message(small):
         perturb.CameraPerturber("L-A9", 1)
     with pytest.raises(perturb.PerturbError, match="sensor"):
         perturb.LidarPerturber("L-A9", 1, sensor="hdl99")
+    with pytest.raises(ValueError, match="unknown perturbation"):
+        perturb.CameraPerturber("C-Z9", 1)
     p = perturb.CameraPerturber("C-C7", 2)
     with pytest.raises(perturb.PerturbError, match=r"uint8.*got dtype float32"):
         p(small.astype(np.float32))
@@ -169,3 +171,54 @@ def test_on_one_core_the_work_runs_inline_with_the_same_bytes(tmp_path):
     for i in ids:
         want = perturb.CameraPerturber(i, 1, seed=5)(frame, 3)
         assert np.array_equal(got[i], want), i
+
+
+def test_every_bad_argument_raises_perturb_error_naming_it(small):
+    """Issue 33: severity 2**70, 3.0 or '3' and a negative seed raised OverflowError/TypeError."""
+    cloud = np.zeros((10, 4), np.float32)
+    cases = [
+        (lambda: perturb.CameraPerturber("C-C7", 2**70), r"severity 1180591620717411303424 is out of range"),
+        (lambda: perturb.CameraPerturber("C-C7", 3.0), r"severity must be an integer, got float 3.0"),
+        (lambda: perturb.CameraPerturber("C-C7", "3"), r"severity must be an integer, got str '3'"),
+        (lambda: perturb.CameraPerturber("C-C7", True), r"severity must be an integer, got bool"),
+        (lambda: perturb.CameraPerturber("C-C7", 3, seed=-1), r"seed must be an integer in 0..2\*\*64, got -1"),
+        (lambda: perturb.CameraPerturber("C-C7", 3, seed=2**64), r"seed must be an integer in 0..2\*\*64"),
+        (lambda: perturb.CameraPerturber("C-C7", 3, seed=0.5), r"seed must be an integer, got float"),
+        (lambda: perturb.CameraPerturber("C-C7", 3)(small, -1), r"seq must be an integer in 0..2\*\*64, got -1"),
+        (lambda: perturb.CameraPerturber("C-C7", 3)(small, 2.0), r"seq must be an integer, got float"),
+        (lambda: perturb.CameraPerturber("C-C7", 3).apply_(small.copy(), "1"), r"seq must be an integer, got str"),
+        (lambda: perturb.CameraPerturber("C-C7", 3)(small, format=3), r"format must be a str, got int"),
+        (lambda: perturb.LidarPerturber("L-B1", 2**70), r"severity .* is out of range for L-B1"),
+        (lambda: perturb.LidarPerturber("L-B1", 1, seed=-5), r"seed must be an integer in 0..2\*\*64, got -5"),
+        (lambda: perturb.LidarPerturber("L-B1", 1, sensor=7), r"sensor must be a str, got int"),
+        (lambda: perturb.LidarPerturber("L-B1", 1, forward="up"), r"forward: .*`up` is not an axis"),
+        (lambda: perturb.LidarPerturber("L-B1", 1, forward="+z"), r"forward"),
+        (lambda: perturb.LidarPerturber("L-B1", 1, intensity_max="x"), r"intensity_max must be a number"),
+        (lambda: perturb.LidarPerturber("L-B1", 1, intensity_max=3), r"intensity.max must be 1 or 255"),
+        (lambda: perturb.LidarPerturber("L-B1", 1, fields="xyz"), r"fields must be a list of str"),
+        (lambda: perturb.LidarPerturber("L-B1", 1)(cloud, -2), r"seq must be an integer in 0..2\*\*64"),
+        (lambda: perturb.detect(cloud, objects=1), r"objects must be True or False, got int 1"),
+        (lambda: perturb.detect(cloud, class_="tram"), r"class_: .*unknown object class `tram`"),
+        (lambda: perturb.detect(cloud, forward="-q"), r"forward"),
+        (lambda: perturb.apply_encoded(b"\0" * 12, "mono8", 4, 3, 4, "C-A1", 9.5), r"severity must be an integer"),
+        (lambda: perturb.perturber(5, 1), r"id must be a str"),
+        (lambda: perturb.perturber("C-C7", 1, sensor="hdl64e"), r"camera perturbation: the LiDAR options"),
+    ]
+    for call, message in cases:
+        with pytest.raises(perturb.PerturbError, match=message):
+            call()
+
+
+def test_help_shows_the_real_signatures():
+    """Issue 33: help() showed __call__(*args, **kwargs)."""
+    import inspect
+    import pydoc
+
+    sig = lambda f: str(inspect.signature(f))  # noqa: E731
+    assert "seq: int = 0, *, format" in sig(perturb.CameraPerturber.__call__)
+    assert sig(perturb.CameraPerturber.apply_) == "(self, image, seq=0, *, format=None)"
+    assert "(self, points: Any, seq: int = 0)" in sig(perturb.LidarPerturber.__call__)
+    assert "forward: Optional[str] = None" in sig(perturb.LidarPerturber)
+    assert "sensor=None, forward=None" in sig(perturb.detect)
+    text = pydoc.render_doc(perturb.LidarPerturber, renderer=pydoc.plaintext)
+    assert "__call__(self, points: Any, seq: int = 0)" in text and "*args" not in text

@@ -72,13 +72,61 @@ def test_extra_columns_are_carried_through(scan):
         assert np.array_equal(both[:, 5], both[:, 4] * 2), "extra columns stay with their point"
 
 
-def test_detect_matches_perturb_detect(cli, scan_path, scan):
-    expected = json.loads(run(cli, "detect", scan_path, "--json").stdout)
-    got = perturb.detect(scan)
+def _same_detections(got, expected):
     assert len(expected) > 3 and len(got) == len(expected)
     for g, e in zip(got, expected):
+        assert set(g) == set(e) == {"center", "size", "yaw", "class", "points"}
         np.testing.assert_allclose(g["center"], e["center"], rtol=0, atol=1e-5)
         np.testing.assert_allclose(g["size"], e["size"], rtol=0, atol=1e-5)
-        assert abs(g["yaw"] - e["yaw"]) < 1e-6 and g["points"] == e["points"]
+        assert abs(g["yaw"] - e["yaw"]) < 1e-6
+        assert g["points"] == e["points"] and g["class"] == e["class"]
+
+
+def test_detect_matches_perturb_detect(cli, scan_path, scan):
+    # perturb detect reads a KITTI .bin as the HDL-64E (the detector's radii follow its beams).
+    expected = json.loads(run(cli, "detect", scan_path, "--json").stdout)
+    _same_detections(perturb.detect(scan, sensor="hdl64e"), expected)
+    assert any(e["class"] == "vehicle" for e in expected)
     objects = json.loads(run(cli, "detect", scan_path, "--json", "--objects").stdout)
-    assert len(perturb.detect(scan, objects=True)) == len(objects)
+    assert len(perturb.detect(scan, objects=True, sensor="hdl64e")) == len(objects)
+    vehicles = json.loads(run(cli, "detect", scan_path, "--json", "--class", "vehicle").stdout)
+    _same_detections(perturb.detect(scan, class_="vehicle", sensor="hdl64e"), vehicles)
+
+
+def _turned(scan):
+    """The scan in nuScenes' convention (x right, y forward): (x, y, z) -> (-y, x, z)."""
+    out = scan.copy()
+    out[:, 0], out[:, 1] = -scan[:, 1], scan[:, 0]
+    return out
+
+
+def test_a_y_forward_cloud_gives_the_bytes_of_perturb_apply(cli, shared, scan, tmp_path):
+    # Issue 33: without a forward axis, 21 LiDAR ids differed from perturb apply on a y-forward
+    # cloud at every severity. The shared scan turned 90 degrees, read as looking along +y.
+    turned = _turned(scan)
+    src = tmp_path / "turned.bin"
+    turned.tofile(src)
+
+    def cli_out(id_):
+        out = tmp_path / f"{id_}.bin"
+        run(cli, "apply", "--id", id_, "--severity", 2, "--seed", SEED, "--seq", SEQ,
+            "--forward", "+y", src, "-o", out)
+        return out.read_bytes()
+
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        expected = dict(zip(LIDAR, pool.map(cli_out, LIDAR)))
+    for id_ in LIDAR:
+        p = perturb.LidarPerturber(id_, 2, seed=SEED, sensor="hdl64e", forward="+y")
+        assert p.forward == "+y"
+        assert p(turned, seq=SEQ).tobytes() == expected[id_], f"{id_} differs from perturb apply"
+    # The sensor's front is +y: on a whole 360-degree scan the field-of-view filter keeps the
+    # points ahead (y > 0), the same points it keeps of the original scan ahead along +x (without
+    # the forward axis it kept the sensor's right-hand side).
+    full = np.fromfile(shared / "kitti" / "velodyne" / "000000.bin", dtype="<f4").reshape(-1, 4)
+    fov = perturb.LidarPerturber("L-B6", 3, seed=SEED, sensor="hdl64e", forward="+y")(_turned(full))
+    plain = perturb.LidarPerturber("L-B6", 3, seed=SEED, sensor="hdl64e")(full)
+    assert np.array_equal(fov, _turned(plain))
+    assert (fov[:, 1] > 0).mean() > 0.99 and len(fov) < 0.5 * len(full)
+    # The detector's boxes, in the cloud's own frame, with their class.
+    boxes = json.loads(run(cli, "detect", src, "--json", "--forward", "+y").stdout)
+    _same_detections(perturb.detect(turned, sensor="hdl64e", forward="+y"), boxes)

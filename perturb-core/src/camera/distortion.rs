@@ -305,70 +305,113 @@ impl CameraPerturbation for Pixelate {
         let recip: Vec<u64> = (0..=most as u64)
             .map(|n| if n == 0 { 0 } else { (1u64 << 32).div_ceil(n) })
             .collect();
-        let xspans: Vec<(usize, usize)> = (0..sw).map(|i| span(i, w, sw)).collect();
-        let mut small = vec![0u8; sw * sh * c];
-        small
-            .par_chunks_mut(sw * c)
-            .enumerate()
-            .for_each(|(j, row)| {
+        let xspans: Vec<(u32, u32)> = (0..sw)
+            .map(|i| {
+                let (a, b) = span(i, w, sw);
+                (a as u32, b as u32)
+            })
+            .collect();
+        let xmap: Vec<u32> = (0..w).map(|x| (x * sw / w).min(sw - 1) as u32).collect();
+        // Output rows in runs showing the same small row j = floor(y sh / h): the run's first row
+        // is enlarged from small row j, the others are copies of it.
+        let mut runs: Vec<(usize, Vec<&mut [u8]>)> = Vec::with_capacity(sh);
+        for (y, row) in output.rows_mut().into_iter().enumerate() {
+            let j = (y * sh / h).min(sh - 1);
+            match runs.last_mut() {
+                Some((k, rows)) if *k == j => rows.push(row),
+                _ => runs.push((j, vec![row])),
+            }
+        }
+        let format = input.format;
+        runs.into_par_iter().for_each_init(
+            || PixelateRows {
+                sums: vec![0; (w + 1) * c],
+                small: vec![0; sw * c],
+            },
+            |buf, (j, mut rows)| {
                 let (y0, y1) = span(j, h, sh);
-                // Column sums over the footprint's rows, then sums over each footprint's columns.
-                let mut cols = vec![0u32; w * c];
-                for y in y0..y1 {
-                    for (a, &v) in cols.iter_mut().zip(input.row(y)) {
-                        *a += v as u32;
+                buf.column_sums(input, y0..y1, c);
+                let n_rows = y1 - y0;
+                let (first, rest) = rows.split_first_mut().expect("a run has a row");
+                match c {
+                    1 => buf.row::<1>(&xspans, n_rows, &recip, &xmap, first),
+                    3 => buf.row::<3>(&xspans, n_rows, &recip, &xmap, first),
+                    _ => buf.row::<4>(&xspans, n_rows, &recip, &xmap, first),
+                }
+                for r in rest.iter_mut() {
+                    r.copy_from_slice(first);
+                }
+                if format.alpha_offset().is_some() {
+                    for (y, r) in (y0..).zip(rows.iter_mut()) {
+                        copy_alpha(format, input.row(y), r);
                     }
                 }
-                let spans = xspans.iter().copied();
-                match c {
-                    1 => average_row::<1>(&cols, spans, y1 - y0, &recip, row),
-                    3 => average_row::<3>(&cols, spans, y1 - y0, &recip, row),
-                    _ => average_row::<4>(&cols, spans, y1 - y0, &recip, row),
-                }
-            });
-        let xmap: Vec<usize> = (0..w).map(|x| (x * sw / w).min(sw - 1)).collect();
-        let format = input.format;
-        par_rows(input, output, |y, src, dst| {
-            let j = (y * sh / h).min(sh - 1);
-            let srow = &small[j * sw * c..(j + 1) * sw * c];
-            match c {
-                1 => nearest_row::<1>(srow, &xmap, dst),
-                3 => nearest_row::<3>(srow, &xmap, dst),
-                _ => nearest_row::<4>(srow, &xmap, dst),
-            }
-            copy_alpha(format, src, dst);
-        });
+            },
+        );
     }
 }
 
-/// One row of area averages: small pixel i averages the column sums `cols` (over `rows` rows)
-/// of its span `[x0, x1)`, rounded, with `recip[n]` the 32.32 reciprocal of n.
-fn average_row<const C: usize>(
-    cols: &[u32],
-    spans: impl Iterator<Item = (usize, usize)>,
-    rows: usize,
-    recip: &[u64],
-    out: &mut [u8],
-) {
-    for (q, (x0, x1)) in out.chunks_exact_mut(C).zip(spans) {
-        let n = rows * (x1 - x0);
-        let mut acc = [0u32; C];
-        for px in cols[x0 * C..x1 * C].chunks_exact(C) {
+/// A worker's buffers for pixelate's rows.
+struct PixelateRows {
+    /// The footprint's column sums, then their running sums along the row (one pixel of zeros
+    /// first).
+    sums: Vec<u32>,
+    /// One small row.
+    small: Vec<u8>,
+}
+
+impl PixelateRows {
+    /// The sums over `rows` of the input's columns, shifted by one pixel (`sums[C..]`).
+    fn column_sums(&mut self, input: &ImageView<'_>, rows: std::ops::Range<usize>, c: usize) {
+        let (first, rest) = self.sums.split_at_mut(c);
+        first.fill(0);
+        let (y0, y1) = (rows.start, rows.end);
+        for (a, &v) in rest.iter_mut().zip(input.row(y0)) {
+            *a = v as u32;
+        }
+        for y in y0 + 1..y1 {
+            for (a, &v) in rest.iter_mut().zip(input.row(y)) {
+                *a += v as u32;
+            }
+        }
+    }
+
+    /// Small row of area averages from the column sums (small pixel i: the columns of its span
+    /// over `rows` rows, rounded, `recip[n]` the 32.32 reciprocal of n), enlarged into `dst`:
+    /// pixel x shows small pixel `xmap[x]`.
+    fn row<const C: usize>(
+        &mut self,
+        xspans: &[(u32, u32)],
+        rows: usize,
+        recip: &[u64],
+        xmap: &[u32],
+        dst: &mut [u8],
+    ) {
+        // Running sums along the row, kept in registers: entry x C + ch becomes channel ch's sum
+        // over columns 0..x, so a span's sum is the difference of two entries.
+        let mut run = [0u32; C];
+        for px in self.sums[C..].chunks_exact_mut(C) {
+            for (r, v) in run.iter_mut().zip(px) {
+                *r += *v;
+                *v = *r;
+            }
+        }
+        let sums = &self.sums;
+        for (q, &(x0, x1)) in self.small.chunks_exact_mut(C).zip(xspans) {
+            let (x0, x1) = (x0 as usize, x1 as usize);
+            let n = rows * (x1 - x0);
+            let (r, half) = (recip[n], n as u32 / 2);
+            let (a, b) = (&sums[x0 * C..x0 * C + C], &sums[x1 * C..x1 * C + C]);
             for ch in 0..C {
-                acc[ch] += px[ch];
+                q[ch] = ((((b[ch] - a[ch]) + half) as u64 * r) >> 32) as u8;
             }
         }
-        for ch in 0..C {
-            q[ch] = (((acc[ch] + n as u32 / 2) as u64 * recip[n]) >> 32) as u8;
+        let small = &self.small;
+        for (q, &i) in dst.chunks_exact_mut(C).zip(xmap) {
+            let i = i as usize * C;
+            let p: [u8; C] = small[i..i + C].try_into().expect("C bytes");
+            q.copy_from_slice(&p);
         }
-    }
-}
-
-/// Nearest-neighbour row: pixel x of `dst` is pixel `xmap[x]` of `src` (`C` bytes per pixel).
-fn nearest_row<const C: usize>(src: &[u8], xmap: &[usize], dst: &mut [u8]) {
-    for (q, &i) in dst.chunks_exact_mut(C).zip(xmap) {
-        let p: [u8; C] = src[i * C..i * C + C].try_into().expect("C bytes");
-        q.copy_from_slice(&p);
     }
 }
 

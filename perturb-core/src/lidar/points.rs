@@ -29,6 +29,9 @@ pub struct Points {
     pub ring_derived: bool,
     /// The sensor's frame convention the positions were converted from.
     pub axes: Axes,
+    /// The sensor model the points were read with (its beam elevations, azimuth resolution and
+    /// range set the detector's sensor-derived parameters); `None` for points built by hand.
+    pub sensor: Option<SensorModel>,
     /// The ring table of the last sensor model rings were derived for (kept between frames).
     ring_table: Option<RingTable>,
 }
@@ -86,6 +89,9 @@ impl Points {
         }
         self.intensity = intensity;
         self.axes = sensor.axes;
+        if self.sensor.as_ref() != Some(sensor) {
+            self.sensor = Some(sensor.clone());
+        }
         if !self.axes.is_canonical() {
             for i in 0..n {
                 let q = self.axes.to_canonical([self.x[i], self.y[i], self.z[i]]);

@@ -1,10 +1,11 @@
 //! Shared helpers of the integration tests: the real recorded data in `../shared/data`.
 #![allow(dead_code)]
 
-use perturb_core::cloud::Cloud;
+use perturb_core::cloud::{Cloud, Datatype, PointField, PointLayout};
 use perturb_core::formats::{kitti, picture};
 use perturb_core::image::{Image, resize_bilinear};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// `../shared/data` (or `$PERTURB_SHARED_DATA`), or `None` with a message saying the test skips
 /// (a failure under `CI=true`, where the data must be there).
@@ -46,6 +47,62 @@ pub fn kitti_scan(test: &str, idx: u32) -> Option<Cloud> {
     Some(
         kitti::decode_kitti(&std::fs::read(&p).expect("read KITTI bin")).expect("decode KITTI bin"),
     )
+}
+
+/// The first PointCloud2 of a ROS 1 MCAP (the `ros1` profile: ROS 1 serialisation), decoded by
+/// hand (little-endian, u32 length prefixes), with its frame id.
+pub fn ros1_cloud(path: &Path) -> (Cloud, String) {
+    let bytes = std::fs::read(path).expect("read mcap");
+    for m in mcap::MessageStream::new(&bytes).expect("mcap") {
+        let m = m.expect("message");
+        let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
+        if schema != Some("sensor_msgs/PointCloud2") {
+            continue;
+        }
+        let d = &m.data[..];
+        let mut o = 0usize;
+        let mut u32_ = || {
+            let v = u32::from_le_bytes(d[o..o + 4].try_into().unwrap());
+            o += 4;
+            v
+        };
+        let (_seq, _sec, _nsec) = (u32_(), u32_(), u32_());
+        let len = u32_() as usize;
+        let frame = String::from_utf8(d[o..o + len].to_vec()).unwrap();
+        o += len;
+        let u32_ = |o: &mut usize| {
+            let v = u32::from_le_bytes(d[*o..*o + 4].try_into().unwrap());
+            *o += 4;
+            v
+        };
+        let height = u32_(&mut o);
+        let width = u32_(&mut o);
+        let nf = u32_(&mut o);
+        let mut fields = Vec::new();
+        for _ in 0..nf {
+            let l = u32_(&mut o) as usize;
+            let name = String::from_utf8(d[o..o + l].to_vec()).unwrap();
+            o += l;
+            let offset = u32_(&mut o);
+            let dt = d[o];
+            o += 1;
+            let count = u32_(&mut o);
+            let mut f = PointField::new(&name, offset, Datatype::from_code(dt).expect("datatype"));
+            f.count = count;
+            fields.push(f);
+        }
+        let big_endian = d[o] != 0;
+        o += 1;
+        let step = u32_(&mut o);
+        let row_step = u32_(&mut o);
+        let n = u32_(&mut o) as usize;
+        let data = d[o..o + n].to_vec();
+        let layout = Arc::new(PointLayout::new(fields, step, big_endian).unwrap());
+        let cloud =
+            Cloud::from_vec(layout, data, width, height, row_step as usize, true).expect("cloud");
+        return (cloud, frame);
+    }
+    panic!("no PointCloud2 in {}", path.display());
 }
 
 /// One module per catalogue entry of `$modality`, named after its ID (`c_a1`, `l_b3`), holding a

@@ -27,9 +27,12 @@ in place when their pixels (points) are packed; the GIL is released while a fram
 and a perturber may be shared by threads.
 """
 
+from typing import Any, Optional, Sequence
+
+import numpy as _np
+
+from . import _perturb
 from ._perturb import (
-    CameraPerturber,
-    LidarPerturber,
     PerturbError,
     __version__,
     apply_encoded,
@@ -38,6 +41,64 @@ from ._perturb import (
     report,
     encodings,
 )
+
+
+class CameraPerturber(_perturb.CameraPerturber):
+    """A camera perturbation configured by ID (or name), severity and seed.
+
+    ``p(image, seq=0)`` returns the perturbed copy of an HxWx3 (rgb8), HxWx4 (rgba8) or HxW
+    (mono8) uint8 array; ``p.apply_(image, seq=0)`` perturbs it in place. The output is a pure
+    function of (image, ID, severity, seed, seq), byte-identical to ``perturb apply`` and the
+    daemon. Safe to call from many threads; the GIL is released during the work. Every bad
+    argument raises :class:`PerturbError` naming it.
+    """
+
+    __slots__ = ()
+
+    def __new__(cls, id: str, severity: int, seed: int = 0) -> "CameraPerturber":
+        return super().__new__(cls, id, severity, seed)
+
+    def __call__(
+        self, image: Any, seq: int = 0, *, format: Optional[str] = None
+    ) -> _np.ndarray:
+        """The perturbed copy of ``image`` at frame sequence number ``seq``. ``format`` names
+        the pixel order of a 3- or 4-channel array: ``rgb8`` (default), ``bgr8`` (OpenCV),
+        ``rgba8``, ``bgra8``."""
+        return _perturb.CameraPerturber.__call__(self, image, seq, format=format)
+
+
+class LidarPerturber(_perturb.LidarPerturber):
+    """A LiDAR perturbation configured by ID (or name), severity, seed and sensor model.
+
+    ``p(points, seq=0)`` returns the perturbed copy of an (N, k) float32 array (x, y, z,
+    intensity, then extra columns, carried through); points may be removed or added. ``sensor``
+    (``vlp32c`` by default, ``vlp16``, ``hdl32e``, ``hdl64e``: KITTI is ``hdl64e``),
+    ``intensity_max`` (1 or 255) and ``forward`` (``+x`` by default; ``+y`` for nuScenes'
+    LIDAR_TOP) say how to read the cloud, as the options of ``perturb apply`` do; ``fields``
+    names the columns. Every bad argument raises :class:`PerturbError` naming it.
+    """
+
+    __slots__ = ()
+
+    def __new__(
+        cls,
+        id: str,
+        severity: int,
+        seed: int = 0,
+        sensor: Optional[str] = None,
+        intensity_max: Optional[float] = None,
+        *,
+        fields: Optional[Sequence[str]] = None,
+        forward: Optional[str] = None,
+    ) -> "LidarPerturber":
+        return super().__new__(
+            cls, id, severity, seed, sensor, intensity_max, fields=fields, forward=forward
+        )
+
+    def __call__(self, points: Any, seq: int = 0) -> _np.ndarray:
+        """The perturbed copy of ``points`` at frame sequence number ``seq`` (N may change)."""
+        return _perturb.LidarPerturber.__call__(self, points, seq)
+
 
 __all__ = [
     "CameraPerturber",
@@ -56,11 +117,18 @@ __all__ = [
 def perturber(id: str, severity: int, seed: int = 0, **lidar_options):
     """The camera or LiDAR perturber of ``id`` (ID or name), whichever its modality is.
 
-    ``lidar_options`` (``sensor``, ``intensity_max``, ``fields``) apply to LiDAR perturbations.
+    ``lidar_options`` (``sensor``, ``intensity_max``, ``fields``, ``forward``) apply to LiDAR
+    perturbations.
     """
+    if not isinstance(id, str):
+        raise PerturbError(f"id must be a str (an ID such as C-C7, or a name), got {id!r}")
     entry = next(
         (e for e in catalogue() if id.lower() in (e["id"].lower(), e["name"].lower())), None
     )
     if entry is not None and entry["modality"] == "lidar":
         return LidarPerturber(id, severity, seed, **lidar_options)
+    if lidar_options:
+        raise PerturbError(
+            f"{id} is a camera perturbation: the LiDAR options {sorted(lidar_options)} do not apply"
+        )
     return CameraPerturber(id, severity, seed)

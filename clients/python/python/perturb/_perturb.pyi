@@ -22,11 +22,17 @@ class Entry(TypedDict):
     description: str
     reference: str
 
-class Detection(TypedDict):
-    center: Tuple[float, float, float]
-    size: Tuple[float, float, float]
-    yaw: float
-    points: int
+# ``class`` is ``vehicle``, ``pedestrian`` or ``other`` (a keyword: the functional syntax).
+Detection = TypedDict(
+    "Detection",
+    {
+        "center": Tuple[float, float, float],
+        "size": Tuple[float, float, float],
+        "yaw": float,
+        "class": str,
+        "points": int,
+    },
+)
 
 def catalogue(modality: Optional[str] = None) -> List[Entry]:
     """Every perturbation (of ``modality``, ``"camera"`` or ``"lidar"``, if given)."""
@@ -64,6 +70,7 @@ class LidarPerturber:
         intensity_max: Optional[float] = None,
         *,
         fields: Optional[Sequence[str]] = None,
+        forward: Optional[str] = None,
     ) -> None: ...
     def __call__(self, points: npt.ArrayLike, seq: int = 0) -> npt.NDArray[np.float32]:
         """The perturbed copy of an (N, k) float32 array; N may change."""
@@ -77,11 +84,23 @@ class LidarPerturber:
     def seed(self) -> int: ...
     @property
     def sensor(self) -> str: ...
+    @property
+    def forward(self) -> str:
+        """The axis the sensor's frame looks along (``+x``, ``-x``, ``+y`` or ``-y``)."""
+    @property
+    def intensity_max(self) -> float: ...
 
 def detect(
-    points: npt.ArrayLike, *, objects: bool = False, fields: Optional[Sequence[str]] = None
+    points: npt.ArrayLike,
+    *,
+    objects: bool = False,
+    fields: Optional[Sequence[str]] = None,
+    sensor: Optional[str] = None,
+    forward: Optional[str] = None,
+    intensity_max: Optional[float] = None,
+    class_: Optional[str] = None,
 ) -> List[Detection]:
-    """The clustering detector's boxes (``perturb detect --json``)."""
+    """The clustering detector's boxes (``perturb detect --json``), in the cloud's frame."""
 
 class Encoding(TypedDict):
     name: str
@@ -128,6 +147,7 @@ def plan_batch(
     sensor: Optional[str] = None,
     intensity_max: Optional[float] = None,
     shard: Optional[str] = None,
+    forward: Optional[str] = None,
 ) -> Dict[str, Any]:
     """Plans a folder batch as ``perturb batch`` and writes ``OUT/batch.json``."""
 
@@ -157,5 +177,6 @@ class BatchWorker:
         seed: int = 0,
         sensor: Optional[str] = None,
         intensity_max: Optional[float] = None,
+        forward: Optional[str] = None,
     ) -> None: ...
     def run(self, rel: _Path, seq: int, id: str, severity: int, dir: _Path) -> bool: ...

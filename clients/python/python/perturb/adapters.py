@@ -16,9 +16,21 @@ from typing import Any, Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from ._perturb import CameraPerturber
+from . import CameraPerturber
+from ._perturb import PerturbError
 
 __all__ = ["Transform", "PerturbedDataset", "albumentations_transform"]
+
+
+# PIL modes whose samples are wider than 8 bits: refused rather than clipped.
+_PIL_WIDE_MODES = {
+    "I;16": "16-bit",
+    "I;16L": "16-bit",
+    "I;16B": "16-bit",
+    "I;16N": "16-bit",
+    "I": "32-bit integer",
+    "F": "32-bit float",
+}
 
 
 def _perturb_any(p: CameraPerturber, image: Any, seq: int) -> Any:
@@ -29,7 +41,16 @@ def _perturb_any(p: CameraPerturber, image: Any, seq: int) -> Any:
     if mod.startswith("PIL."):
         from PIL import Image
 
-        return Image.fromarray(p(np.asarray(image.convert("RGB") if image.mode not in ("RGB", "L") else image), seq))
+        if image.mode in _PIL_WIDE_MODES:
+            # As the command line: 8-bit images only through this path (a 16-bit PNG is not
+            # squeezed into 8 bits behind the caller's back).
+            raise PerturbError(
+                f"PIL image mode {image.mode!r} has {_PIL_WIDE_MODES[image.mode]} samples: "
+                "perturb works on 8-bit images here (convert it yourself, or perturb a 16-bit "
+                "frame's bytes with perturb.apply_encoded(..., 'mono16', ...))"
+            )
+        rgb = image if image.mode in ("RGB", "RGBA", "L") else image.convert("RGB")
+        return Image.fromarray(p(np.asarray(rgb), seq))
     if mod.startswith("torch"):
         import torch
 
@@ -63,9 +84,11 @@ class Transform:
 
 
 def albumentations_transform(id: str, severity: int, seed: int = 0, p: float = 1.0):
-    """An albumentations ``ImageOnlyTransform`` applying ``id`` at ``severity`` (with
-    probability ``p``); the sequence number is 0 (the draw of albumentations decides whether it
-    applies, the perturbation itself is reproducible)."""
+    """An albumentations ``ImageOnlyTransform`` applying ``id`` at ``severity`` with the
+    perturbation's ``seed`` (with probability ``p``); the sequence number is 0 (the draw of
+    albumentations decides whether it applies, the perturbation itself is reproducible). The
+    seed survives ``A.Compose`` and ``A.to_dict``/``A.from_dict`` (tested with albumentations
+    2.0.8)."""
     return AlbumentationsTransform(id, severity, seed, p=p)
 
 
@@ -73,18 +96,34 @@ try:  # pragma: no cover - depends on the environment
     import albumentations as _A
 
     class AlbumentationsTransform(_A.ImageOnlyTransform):
-        """``perturb``'s perturbation as an albumentations ``ImageOnlyTransform``."""
+        """``perturb``'s perturbation as an albumentations ``ImageOnlyTransform``.
 
-        def __init__(self, id: str, severity: int, seed: int = 0, p: float = 1.0):
-            super().__init__(p=p)
-            self.id, self.severity, self.seed = id, severity, seed
+        The perturbation's seed is kept as ``perturb_seed``: albumentations 2 owns a transform's
+        ``seed`` attribute (``A.Compose`` resets it, ``A.to_dict`` leaves it out), so a seed kept
+        there would be lost. ``A.to_dict``/``A.from_dict`` rebuild the same perturbation.
+        """
+
+        def __init__(
+            self,
+            id: str,
+            severity: int,
+            seed: int = 0,
+            p: float = 1.0,
+            *,
+            perturb_seed: Optional[int] = None,
+            **kwargs: Any,
+        ):
+            super().__init__(p=p, **kwargs)
+            if perturb_seed is not None:
+                seed = perturb_seed
             self.perturber = CameraPerturber(id, severity, seed)
+            self.id, self.severity, self.perturb_seed = self.perturber.id, self.perturber.severity, self.perturber.seed
 
         def apply(self, img: np.ndarray, **params: Any) -> np.ndarray:
             return self.perturber(img, 0)
 
         def get_transform_init_args_names(self) -> Tuple[str, ...]:
-            return ("id", "severity", "seed")
+            return ("id", "severity", "perturb_seed")
 
 except ImportError:  # albumentations is optional
 

@@ -25,8 +25,8 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from . import _perturb
-from ._perturb import CameraPerturber, LidarPerturber, PerturbError
+from . import CameraPerturber, LidarPerturber, _perturb
+from ._perturb import PerturbError
 
 __all__ = ["perturb_dataset", "run_batch", "grid"]
 
@@ -55,9 +55,16 @@ def grid(ids: Iterable[str], severities: Iterable[int]) -> List[Tuple[str, int]]
     by_name = {}
     for e in entries.values():
         by_name.setdefault(e["name"].lower(), e)
+    if isinstance(ids, str):
+        raise PerturbError(f"ids must be a list of IDs or names, got the str {ids!r}")
     sevs = list(severities)
+    for s in sevs:
+        if not isinstance(s, int) or isinstance(s, bool):
+            raise PerturbError(f"severities must be integers, got {type(s).__name__} {s!r}")
     out = []
     for i in ids:
+        if not isinstance(i, str):
+            raise PerturbError(f"ids must be IDs or names (str), got {type(i).__name__} {i!r}")
         e = entries.get(i.upper()) or by_name.get(i.lower())
         if e is None:
             raise PerturbError(f"unknown perturbation `{i}` (see perturb.catalogue())")
@@ -132,6 +139,7 @@ def perturb_dataset(
     intensity_max: Optional[float] = None,
     fields: Optional[Sequence[str]] = None,
     format: Optional[str] = None,
+    forward: Optional[str] = None,
     batch_size: int = 8,
     concurrency: int = 2,
 ):
@@ -140,15 +148,22 @@ def perturb_dataset(
     Rows hold an ``image`` (HxWx3 / HxW uint8) or ``points`` ((N, k) float32) column (or the one
     named by ``column``) and optionally ``seq`` (the frame sequence number, default 0). Each row
     comes out once per pair, with ``id`` and ``severity`` columns and the perturbed array in place
-    of the input; other columns are carried along. ``sensor``, ``intensity_max`` and ``fields``
-    configure LiDAR perturbers, ``format`` the pixel order of images (``bgr8``). Lazy, like every
+    of the input; other columns are carried along. ``sensor``, ``intensity_max``, ``forward``
+    (the axis the clouds' frame looks along, ``+x`` by default) and ``fields`` configure LiDAR
+    perturbers as for :class:`perturb.LidarPerturber`, ``format`` the pixel order of images
+    (``bgr8``). Lazy, like every
     Ray Dataset transformation. ``batch_size`` rows go to an actor at a time; ``concurrency``
     actors run (each with its own perturbers).
     """
     pairs = grid(ids, severities)
-    lidar_options = {"sensor": sensor, "intensity_max": intensity_max}
+    lidar_options = {"sensor": sensor, "intensity_max": intensity_max, "forward": forward}
     if fields is not None:
         lidar_options["fields"] = list(fields)
+    # Built once here, so that a bad option raises now (naming it), not in an actor.
+    for id_, sev in pairs:
+        if next(e for e in _perturb.catalogue() if e["id"] == id_)["modality"] == "lidar":
+            LidarPerturber(id_, sev, seed, **lidar_options)
+            break
     return ds.map_batches(
         _PerturbRows,
         fn_constructor_kwargs=dict(
@@ -163,8 +178,8 @@ def perturb_dataset(
 class _WriteFiles:
     """Ray actor: the per-file worker of ``perturb batch`` (one perturber per (ID, severity))."""
 
-    def __init__(self, root, first_file, seed, sensor, intensity_max):
-        self.worker = _perturb.BatchWorker(root, first_file, seed, sensor, intensity_max)
+    def __init__(self, root, first_file, seed, sensor, intensity_max, forward):
+        self.worker = _perturb.BatchWorker(root, first_file, seed, sensor, intensity_max, forward)
 
     def __call__(self, batch: Dict[str, np.ndarray]) -> Dict[str, np.ndarray]:
         written = [
@@ -187,6 +202,7 @@ def run_batch(
     seed: int = 0,
     sensor: Optional[str] = None,
     intensity_max: Optional[float] = None,
+    forward: Optional[str] = None,
     shard: Optional[str] = None,
     batch_size: int = 8,
     concurrency: int = 2,
@@ -194,7 +210,9 @@ def run_batch(
     """``perturb batch INPUT --out OUT`` on Ray, for a folder of images or point clouds.
 
     The selection (``ids``, ``families``, ``modality``, ``severities``, ``shard``), ``seed``,
-    ``sensor`` and ``intensity_max`` mean what the options of ``perturb batch`` mean. Writes the
+    ``sensor``, ``intensity_max`` and ``forward`` mean what the options of ``perturb batch``
+    mean (with its defaults per input kind: a KITTI ``.bin`` is read as an HDL-64E, a nuScenes
+    ``.pcd.bin`` as an HDL-32E looking along +y). Writes the
     same files, manifest and ``.done`` markers; sets already done and files already written are
     skipped (resumable). The work is one row per (file, unfinished set), spread with
     ``map_batches`` over ``concurrency`` actors, ``batch_size`` rows at a time.
@@ -214,6 +232,7 @@ def run_batch(
         sensor=sensor,
         intensity_max=intensity_max,
         shard=shard,
+        forward=forward,
     )
     files: List[str] = plan["files"]
     todo = plan["todo"]
@@ -232,6 +251,7 @@ def run_batch(
                 seed=seed,
                 sensor=sensor,
                 intensity_max=intensity_max,
+                forward=forward,
             ),
             batch_size=batch_size,
             batch_format="numpy",

@@ -1,9 +1,10 @@
 //! Phase scrambling (C-F2): the Fourier phase of each channel randomised, the amplitude kept.
 
+use crate::camera::ops::{F32x8, Lanes};
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut};
 use rayon::prelude::*;
-use rustfft::num_complex::Complex32;
+use rustfft::num_complex::{Complex, Complex32};
 
 /// C-F2 phase_scrambling: phase noise amplitude s (in units of pi), severities 1..5
 /// (PerturbationDrive `phase_scrambling`).
@@ -21,15 +22,21 @@ pub const PHASE_SCRAMBLE: [f32; 5] = [0.05, 0.15, 0.26, 0.38, 0.55];
 /// it against a direct DFT). The uniform draws are quantised to 4096 levels so that `cos` and `sin`
 /// come from a table built at configuration time (a phase step of at most 0.0004 rad). Frame sizes
 /// with large prime factors transform more slowly (rustfft chooses Rader / Bluestein); the FFT plans
-/// are built at configuration time, with rustfft's scalar algorithms on every CPU (see
-/// [`FftPlan`]), and the working buffers (about 8 bytes per pixel per colour
+/// are built at configuration time, with rustfft's scalar algorithms on every CPU, eight rows or
+/// columns at a time (see [`FftPlan`]), and the working buffers (about 8 bytes per pixel per colour
 /// channel) are kept from frame to frame. A frame makes three passes over memory: the row
 /// transforms, the column transforms (a block of columns is gathered, transformed, scrambled and
 /// transformed back while it sits in the cache), and the inverse row transforms, which write the
 /// output bytes directly.
 pub struct PhaseScrambling {
     seed: u64,
-    plan: FftPlan,
+    w: usize,
+    h: usize,
+    /// The transforms, eight rows or columns at a time (the default).
+    lanes: FftPlan<F32x8>,
+    /// The transforms one row or column at a time, built at the first frame that asks for the
+    /// portable path ([`crate::camera::ops::portable_forced`]): the same bytes.
+    single: std::sync::OnceLock<FftPlan<f32>>,
     /// `(cos, sin)` of `s pi (i + 0.5) / 4096` for the 4096 quantised draws.
     trig: Box<[(f32, f32); 1 << PHASE_BITS]>,
     /// Working buffers of finished frames, reused by the next ones (a frame's spectra are tens
@@ -51,17 +58,17 @@ struct Buffers {
     cols: Vec<Complex32>,
 }
 
-/// Copies one row of a tile: a fixed-size copy for full rows (a `memmove` call per 128 bytes
-/// costs more than the copy).
-#[inline]
-fn copy_tile_row(dst: &mut [Complex32], src: &[Complex32]) {
-    match (
-        <&mut [Complex32; COLUMN_BLOCK]>::try_from(&mut *dst),
-        <&[Complex32; COLUMN_BLOCK]>::try_from(src),
-    ) {
-        (Ok(d), Ok(s)) => *d = *s,
-        _ => dst.copy_from_slice(src),
-    }
+/// Lane `l` of a complex value of lanes, as a complex f32.
+#[inline(always)]
+fn lane_of<V: Lanes>(v: &Complex<V>, l: usize) -> Complex32 {
+    Complex32::new(v.re.lane(l), v.im.lane(l))
+}
+
+/// Sets lane `l` of a complex value of lanes.
+#[inline(always)]
+fn set_lane_of<V: Lanes>(v: &mut Complex<V>, l: usize, c: Complex32) {
+    v.re.set_lane(l, c.re);
+    v.im.set_lane(l, c.im);
 }
 
 /// Bits of one quantised phase draw.
@@ -74,29 +81,47 @@ const COLUMN_BLOCK: usize = 16;
 /// Rows per task of the row transforms.
 const ROW_BAND: usize = 16;
 
-/// The transforms of a frame, rustfft's scalar algorithms on every CPU: the same bytes on x86-64
-/// with and without AVX2 and on aarch64.
+/// The transforms of a frame, rustfft's and realfft's scalar algorithms on every CPU, over
+/// numbers of `V::N` lanes: `f32` transforms one row or column at a time, [`F32x8`] eight at a
+/// time with every operation eight-wide and each lane the f32 bits (`camera/ops/lanes.rs`). Both
+/// give the same bytes on x86-64 with and without AVX2 and on aarch64.
 ///
 /// rustfft's planner, with the crate's default features, picks AVX, SSE or NEON algorithms at run
-/// time. They sum in other orders than the scalar ones (on a 1920x1208 frame 97-99.7 % of the
-/// bins differed in their last bits before rounding, enough to move output bytes), so this crate
-/// turns those features off (`Cargo.toml`) and plans the column transforms with
+/// time. They sum in other orders than the scalar ones, and NEON's fuse multiplies and adds (on a
+/// 1920x1208 frame 97-99.7 % of the bins differed in their last bits before rounding, enough to
+/// move output bytes), so this crate turns those features off (`Cargo.toml`) and plans with
 /// `FftPlannerScalar`; realfft's planner builds its inner transform with rustfft's `FftPlanner`,
 /// which without the features has the scalar algorithms only (a test checks it plans what
 /// `FftPlannerScalar` plans). The scalar algorithms' arithmetic is plain Rust, which rustc never
 /// fuses or reorders; their twiddle factors are the C library's `cos` and `sin` in f64 rounded
 /// to f32, where libraries that differ by an ulp give the same f32 unless the exact value lies
 /// within an ulp of a rounding boundary of f32, about one twiddle in 10^8 (a test checks every
-/// twiddle of the common frame sizes is far from one). Against the SIMD planner on this
-/// project's x86-64 VM, a 1920x1208 frame costs about a third more time (docs/performance.md).
-struct FftPlan {
-    w: usize,
-    h: usize,
-    r2c: std::sync::Arc<dyn realfft::RealToComplex<f32>>,
-    c2r: std::sync::Arc<dyn realfft::ComplexToReal<f32>>,
-    col_fwd: std::sync::Arc<dyn rustfft::Fft<f32>>,
-    col_inv: std::sync::Arc<dyn rustfft::Fft<f32>>,
+/// twiddle of the common frame sizes is far from one). Eight at a time, a frame took 0.45x the
+/// time of one at a time at 1920x1208 and 0.48x at 800x503 on this project's x86-64 VM
+/// (docs/performance.md, "aarch64").
+struct FftPlan<V: Lanes> {
+    r2c: std::sync::Arc<dyn realfft::RealToComplex<V>>,
+    c2r: std::sync::Arc<dyn realfft::ComplexToReal<V>>,
+    col_fwd: std::sync::Arc<dyn rustfft::Fft<V>>,
+    col_inv: std::sync::Arc<dyn rustfft::Fft<V>>,
 }
+
+impl<V: Lanes> FftPlan<V> {
+    fn new(w: usize, h: usize) -> Self {
+        let mut real = realfft::RealFftPlanner::<V>::new();
+        let mut cplx = rustfft::FftPlannerScalar::<V>::new();
+        FftPlan {
+            r2c: real.plan_fft_forward(w),
+            c2r: real.plan_fft_inverse(w),
+            col_fwd: cplx.plan_fft_forward(h),
+            col_inv: cplx.plan_fft_inverse(h),
+        }
+    }
+}
+
+/// Working space of the inverse row transforms of one task: `V::N` half-spectrum rows, the
+/// scratch, and the output rows.
+type InverseWork<V> = (Vec<Complex<V>>, Vec<Complex<V>>, Vec<V>);
 
 /// Registry constructor of C-F2.
 pub const PHASE_SCRAMBLING: CameraBuilder = |s| {
@@ -113,20 +138,14 @@ impl PhaseScrambling {
     /// units of pi).
     fn new(seed: u64, w: usize, h: usize, s: f32) -> Self {
         let (w, h) = (w.max(1), h.max(1));
-        let mut real = realfft::RealFftPlanner::<f32>::new();
-        let mut cplx = rustfft::FftPlannerScalar::<f32>::new();
         let amp = s as f64 * std::f64::consts::PI;
         let levels = 1usize << PHASE_BITS;
         PhaseScrambling {
             seed,
-            plan: FftPlan {
-                w,
-                h,
-                r2c: real.plan_fft_forward(w),
-                c2r: real.plan_fft_inverse(w),
-                col_fwd: cplx.plan_fft_forward(h),
-                col_inv: cplx.plan_fft_inverse(h),
-            },
+            w,
+            h,
+            lanes: FftPlan::new(w, h),
+            single: std::sync::OnceLock::new(),
             trig: (0..levels)
                 .map(|i| {
                     let t = amp * (i as f64 + 0.5) / levels as f64;
@@ -137,6 +156,11 @@ impl PhaseScrambling {
                 .expect("one entry per level"),
             spare: std::sync::Mutex::new(Vec::new()),
         }
+    }
+
+    /// The one-at-a-time transforms, planned at their first use.
+    fn single(&self) -> &FftPlan<f32> {
+        self.single.get_or_init(|| FftPlan::new(self.w, self.h))
     }
 
     /// The quantised uniform draws of column `kx` of the full spectrum of `channel` for frame
@@ -152,22 +176,23 @@ impl PhaseScrambling {
     /// The tiling of the half spectrum: (tiles of [`COLUMN_BLOCK`] columns, bands of
     /// [`ROW_BAND`] rows, rows rounded up to whole bands).
     fn tiling(&self) -> (usize, usize, usize) {
-        let FftPlan { w, h, .. } = self.plan;
+        let (w, h) = (self.w, self.h);
         let nt = (w / 2 + 1).div_ceil(COLUMN_BLOCK);
         let nb = h.div_ceil(ROW_BAND);
         (nt, nb, nb * ROW_BAND)
     }
 
-    /// Real FFT of every row of `nc` channels into `buf.rows`; `load(y, lines)` writes row `y`
-    /// of each channel into `lines` (`nc` lines of `w` after one another). Bands of rows run on
-    /// the worker threads.
-    fn forward_rows(
+    /// Real FFT of every row of `nc` channels into `buf.rows`, `V::N` rows at a time; `load(y,
+    /// lines)` writes row `y` of each channel into `lines` (`nc` lines of `w` after one another).
+    /// Bands of rows run on the worker threads.
+    fn forward_rows<V: Lanes>(
         &self,
+        plan: &FftPlan<V>,
         nc: usize,
         buf: &mut Buffers,
         load: &(dyn Fn(usize, &mut [f32]) + Sync),
     ) {
-        let FftPlan { w, h, .. } = self.plan;
+        let (w, h) = (self.w, self.h);
         let (nt, nb, hp) = self.tiling();
         let (t, r) = (COLUMN_BLOCK, ROW_BAND);
         let zero = Complex32::new(0.0, 0.0);
@@ -178,27 +203,42 @@ impl PhaseScrambling {
             .enumerate()
             .for_each_init(
                 || {
-                    let r2c = &self.plan.r2c;
                     (
                         vec![0f32; nc * w],
-                        r2c.make_output_vec(),
-                        r2c.make_scratch_vec(),
+                        vec![V::zero(); nc * w],
+                        plan.r2c.make_output_vec(),
+                        plan.r2c.make_scratch_vec(),
                     )
                 },
-                |(lines, spec, scratch), (i, band)| {
+                |(lines, input, spec, scratch), (i, band)| {
                     let y0 = i * r;
-                    for j in 0..r.min(h - y0) {
-                        load(y0 + j, lines);
-                        for (line, tiles) in lines
+                    let rows = r.min(h - y0);
+                    for g in (0..rows).step_by(V::N) {
+                        let n = V::N.min(rows - g);
+                        for l in 0..V::N {
+                            if l < n {
+                                load(y0 + g + l, lines);
+                            } else {
+                                lines.fill(0.0);
+                            }
+                            for (d, &v) in input.iter_mut().zip(lines.iter()) {
+                                d.set_lane(l, v);
+                            }
+                        }
+                        for (line, tiles) in input
                             .chunks_exact_mut(w)
                             .zip(band.chunks_exact_mut(nt * r * t))
                         {
-                            self.plan
-                                .r2c
+                            plan.r2c
                                 .process_with_scratch(line, spec, scratch)
                                 .expect("sizes match the plan");
                             for (tile, part) in tiles.chunks_exact_mut(r * t).zip(spec.chunks(t)) {
-                                copy_tile_row(&mut tile[j * t..j * t + part.len()], part);
+                                for l in 0..n {
+                                    let row = &mut tile[(g + l) * t..][..part.len()];
+                                    for (d, v) in row.iter_mut().zip(part) {
+                                        *d = lane_of(v, l);
+                                    }
+                                }
                             }
                         }
                     }
@@ -206,71 +246,84 @@ impl PhaseScrambling {
             );
     }
 
-    /// Column transforms of `nc` channels, one tile of [`COLUMN_BLOCK`] columns at a time:
-    /// gather the tile from `buf.rows` into a column-major block, FFT it, multiply by the
-    /// scrambling multiplier, inverse FFT, and store it row by row into its tile of `buf.cols`.
-    /// The block stays in the cache through all of it.
+    /// Column transforms of `nc` channels, one tile of [`COLUMN_BLOCK`] columns at a time, `V::N`
+    /// columns per transform: gather the tile from `buf.rows` into blocks of columns, FFT them,
+    /// multiply by the scrambling multiplier, inverse FFT, and store them row by row into the
+    /// tile of `buf.cols`. The blocks stay in the cache through all of it.
     ///
     /// The multiplier of bin (ky, kx) is `M = (e^(i theta(ky, kx)) + e^(-i theta(-ky, -kx))) /
     /// 2`; the partner bin lies in column `-kx` of the full spectrum, read backwards from ky = 1.
-    fn scramble_columns(&self, nc: usize, buf: &mut Buffers, seq: u64) {
-        let FftPlan { w, h, .. } = self.plan;
+    fn scramble_columns<V: Lanes>(
+        &self,
+        plan: &FftPlan<V>,
+        nc: usize,
+        buf: &mut Buffers,
+        seq: u64,
+    ) {
+        let (w, h) = (self.w, self.h);
         let wh = w / 2 + 1;
         let (nt, _, hp) = self.tiling();
         let (t, r) = (COLUMN_BLOCK, ROW_BAND);
-        let zero = Complex32::new(0.0, 0.0);
-        let len = self
-            .plan
+        let groups = t.div_ceil(V::N);
+        let len = plan
             .col_fwd
             .get_inplace_scratch_len()
-            .max(self.plan.col_inv.get_inplace_scratch_len());
+            .max(plan.col_inv.get_inplace_scratch_len());
         let m = |a: u16, b: u16| {
             let mask = |q: u16| (q & 0xFFF) as usize;
             let (a, b) = (self.trig[mask(a)], self.trig[mask(b)]);
             Complex32::new((a.0 + b.0) * 0.5, (a.1 - b.1) * 0.5)
         };
+        let zero = Complex::new(V::zero(), V::zero());
         let Buffers { rows, cols } = buf;
         let rows: &[Complex32] = rows;
         cols.par_chunks_mut(hp * t).enumerate().for_each_init(
             || {
                 (
-                    vec![zero; t * h],
+                    vec![zero; groups * h],
                     vec![zero; len],
                     vec![0u16; h],
                     vec![0u16; h],
                 )
             },
-            |(block, scratch, here, there), (i, tile)| {
+            |(blocks, scratch, here, there), (i, tile)| {
                 let (k, b) = (i / nt, i % nt);
                 let x0 = b * t;
                 let n = t.min(wh - x0);
-                let block = &mut block[..n * h];
+                let blocks = &mut blocks[..n.div_ceil(V::N) * h];
+                blocks.fill(zero);
                 for (band, src) in rows.chunks_exact(nc * nt * r * t).enumerate() {
                     let src = &src[i * r * t..(i + 1) * r * t];
                     for (j, row) in src.chunks_exact(t).enumerate().take(h - band * r) {
-                        for (c, &v) in row[..n].iter().enumerate() {
-                            block[c * h + band * r + j] = v;
+                        for (c, v) in row[..n].iter().enumerate() {
+                            set_lane_of(&mut blocks[c / V::N * h + band * r + j], c % V::N, *v);
                         }
                     }
                 }
-                self.plan.col_fwd.process_with_scratch(block, scratch);
-                for (j, col) in block.chunks_exact_mut(h).enumerate() {
-                    let kx = x0 + j;
+                plan.col_fwd.process_with_scratch(blocks, scratch);
+                for c in 0..n {
+                    let (block, l) = (&mut blocks[c / V::N * h..][..h], c % V::N);
+                    let kx = x0 + c;
                     self.column_draws(seq, k, kx, here);
                     self.column_draws(seq, k, (w - kx) % w, there);
-                    col[0] *= m(here[0], there[0]);
-                    for ((v, &a), &b) in col[1..]
+                    let scale = |v: &mut Complex<V>, a: u16, b: u16| {
+                        let mut x = lane_of(v, l);
+                        x *= m(a, b);
+                        set_lane_of(v, l, x);
+                    };
+                    scale(&mut block[0], here[0], there[0]);
+                    for ((v, &a), &b) in block[1..]
                         .iter_mut()
                         .zip(&here[1..])
                         .zip(there[1..].iter().rev())
                     {
-                        *v *= m(a, b);
+                        scale(v, a, b);
                     }
                 }
-                self.plan.col_inv.process_with_scratch(block, scratch);
+                plan.col_inv.process_with_scratch(blocks, scratch);
                 for (y, row) in tile.chunks_exact_mut(t).take(h).enumerate() {
                     for (c, v) in row[..n].iter_mut().enumerate() {
-                        *v = block[c * h + y];
+                        *v = lane_of(&blocks[c / V::N * h + y], c % V::N);
                     }
                 }
             },
@@ -278,45 +331,67 @@ impl PhaseScrambling {
     }
 
     /// Inverse real FFT of rows `y0 .. y0 + out.len() / w` (at most one band, `y0` a multiple of
-    /// [`ROW_BAND`]) of channel `k`'s scrambled spectrum into `out`, not normalised (scaled by
-    /// `w h`); `line` and `scratch` are working space.
-    fn inverse_rows(
+    /// [`ROW_BAND`]) of channel `k`'s scrambled spectrum into `out`, `V::N` rows at a time, not
+    /// normalised (scaled by `w h`).
+    fn inverse_rows<V: Lanes>(
         &self,
+        plan: &FftPlan<V>,
         buf: &Buffers,
         k: usize,
         y0: usize,
         out: &mut [f32],
-        (line, scratch): &mut (Vec<Complex32>, Vec<Complex32>),
+        (line, scratch, back): &mut InverseWork<V>,
     ) {
-        let w = self.plan.w;
+        let w = self.w;
         let wh = w / 2 + 1;
         let (nt, _, hp) = self.tiling();
         let t = COLUMN_BLOCK;
-        let n = out.len() / w;
-        line.resize(n * wh, Complex32::new(0.0, 0.0));
-        let tiles = buf.cols.chunks_exact(hp * t).skip(k * nt).take(nt);
-        for (tile, x0) in tiles.zip((0..wh).step_by(t)) {
-            let cols = t.min(wh - x0);
-            for (r, src) in tile[y0 * t..(y0 + n) * t].chunks_exact(t).enumerate() {
-                copy_tile_row(&mut line[r * wh + x0..r * wh + x0 + cols], &src[..cols]);
+        line.resize(wh, Complex::new(V::zero(), V::zero()));
+        back.resize(w, V::zero());
+        for (g, out) in out.chunks_mut(V::N * w).enumerate() {
+            let n = out.len() / w;
+            let tiles = buf.cols.chunks_exact(hp * t).skip(k * nt).take(nt);
+            for (tile, x0) in tiles.zip((0..wh).step_by(t)) {
+                let cols = t.min(wh - x0);
+                for l in 0..V::N {
+                    let dst = &mut line[x0..x0 + cols];
+                    if l < n {
+                        let src = &tile[(y0 + g * V::N + l) * t..][..cols];
+                        for (d, v) in dst.iter_mut().zip(src) {
+                            set_lane_of(d, l, *v);
+                        }
+                    } else {
+                        // Lanes past the band's last row transform zeros, never read.
+                        for d in dst {
+                            set_lane_of(d, l, Complex32::new(0.0, 0.0));
+                        }
+                    }
+                }
             }
-        }
-        for (row, out) in line.chunks_exact_mut(wh).zip(out.chunks_exact_mut(w)) {
             // The DC and Nyquist bins of a real signal's rows must be real for the inverse.
-            row[0].im = 0.0;
+            line[0].im = V::zero();
             if w.is_multiple_of(2) {
-                row[wh - 1].im = 0.0;
+                line[wh - 1].im = V::zero();
             }
-            self.plan
-                .c2r
-                .process_with_scratch(row, out, scratch)
+            plan.c2r
+                .process_with_scratch(line, back, scratch)
                 .expect("sizes match the plan");
+            for (l, out) in out.chunks_exact_mut(w).enumerate() {
+                for (d, v) in out.iter_mut().zip(back.iter()) {
+                    *d = v.lane(l);
+                }
+            }
         }
     }
-}
 
-impl CameraPerturbation for PhaseScrambling {
-    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
+    /// The frame through the transforms of `plan`.
+    fn run<V: Lanes>(
+        &self,
+        plan: &FftPlan<V>,
+        input: &ImageView<'_>,
+        output: &mut ImageViewMut<'_>,
+        seq: u64,
+    ) {
         let w = input.width as usize;
         let format = input.format;
         let nc = format.color_channels();
@@ -326,7 +401,7 @@ impl CameraPerturbation for PhaseScrambling {
         };
         // Colour channels are read and written in one pass over each row (three strided passes
         // cost more than the row transforms).
-        self.forward_rows(nc, &mut buf, &|y, lines| {
+        self.forward_rows(plan, nc, &mut buf, &|y, lines| {
             let src = input.row(y);
             if nc == 3 {
                 let (l0, rest) = lines.split_at_mut(w);
@@ -338,19 +413,19 @@ impl CameraPerturbation for PhaseScrambling {
                 }
             }
         });
-        self.scramble_columns(nc, &mut buf, seq);
-        let norm = 1.0 / (w * self.plan.h) as f32;
+        self.scramble_columns(plan, nc, &mut buf, seq);
+        let norm = 1.0 / (w * self.h) as f32;
         let byte = |v: f32| crate::camera::ops::byte(v * norm + 0.5);
         let mut rows = output.rows_mut();
         rows.par_chunks_mut(ROW_BAND).enumerate().for_each_init(
             || {
-                let work = (Vec::new(), self.plan.c2r.make_scratch_vec());
+                let work = (Vec::new(), plan.c2r.make_scratch_vec(), Vec::new());
                 (vec![0f32; nc * ROW_BAND * w], vec![0u8; nc * w], work)
             },
             |(planes, bytes, work), (i, band)| {
                 let (y0, n) = (i * ROW_BAND, band.len());
                 for (k, plane) in planes.chunks_exact_mut(ROW_BAND * w).enumerate() {
-                    self.inverse_rows(&buf, k, y0, &mut plane[..n * w], work);
+                    self.inverse_rows(plan, &buf, k, y0, &mut plane[..n * w], work);
                 }
                 for (r, dst) in band.iter_mut().enumerate() {
                     for (k, out) in bytes.chunks_exact_mut(w).enumerate() {
@@ -377,15 +452,117 @@ impl CameraPerturbation for PhaseScrambling {
     }
 }
 
+impl CameraPerturbation for PhaseScrambling {
+    fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
+        if crate::camera::ops::portable_forced() {
+            self.run(self.single(), input, output, seq);
+        } else {
+            self.run(&self.lanes, input, output, seq);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The three passes over one grey plane `x` (`p`'s size) with the transforms of `plan`: the
+    /// scrambled plane, not normalised.
+    fn scrambled_plane<V: Lanes>(
+        p: &PhaseScrambling,
+        plan: &FftPlan<V>,
+        x: &[f64],
+        seq: u64,
+    ) -> Vec<f32> {
+        let w = p.w;
+        let mut buf = Buffers::default();
+        p.forward_rows(plan, 1, &mut buf, &|y, line| {
+            for (d, v) in line.iter_mut().zip(&x[y * w..(y + 1) * w]) {
+                *d = *v as f32;
+            }
+        });
+        p.scramble_columns(plan, 1, &mut buf, seq);
+        let mut plane = vec![0f32; w * p.h];
+        let mut work = (Vec::new(), plan.c2r.make_scratch_vec(), Vec::new());
+        for (band, out) in plane.chunks_mut(ROW_BAND * w).enumerate() {
+            p.inverse_rows(plan, &buf, 0, band * ROW_BAND, out, &mut work);
+        }
+        plane
+    }
+
+    /// The transforms eight at a time (the default) and one at a time (the portable path) give
+    /// the same bytes, on odd sizes (partial groups of lanes in rows and columns, partial tiles
+    /// and bands) in every channel layout.
+    #[test]
+    fn eight_at_a_time_and_one_at_a_time_give_the_same_bytes() {
+        use crate::image::{Image, PixelFormat};
+        for (w, h, format) in [
+            (7u32, 5u32, PixelFormat::Rgb8),
+            (61, 17, PixelFormat::Bgr8),
+            (203, 61, PixelFormat::Rgb8),
+            (67, 29, PixelFormat::Bgra8),
+            (45, 17, PixelFormat::Mono8),
+            (1, 1, PixelFormat::Rgb8),
+        ] {
+            let mut img = Image::new(w, h, format);
+            for (i, v) in img.data.iter_mut().enumerate() {
+                *v = ((i * 97 + i / 7) % 253) as u8;
+            }
+            let p = PhaseScrambling::new(5, w as usize, h as usize, 0.38);
+            let [lanes, single] = [0, 1].map(|k| {
+                let mut out = Image::with_geometry(img.geometry());
+                if k == 0 {
+                    p.run(&p.lanes, &img.view(), &mut out.view_mut(), 3);
+                } else {
+                    p.run(p.single(), &img.view(), &mut out.view_mut(), 3);
+                }
+                out.data
+            });
+            assert_eq!(lanes, single, "{w}x{h} {format}");
+        }
+    }
+
+    /// The process-wide switch (`force_baseline`, as `PERTURB_PORTABLE=1`) reaches the
+    /// transforms: with it a frame goes through the one-at-a-time plan, without it through the
+    /// eight-wide one, with the same bytes.
+    #[test]
+    fn the_portable_switch_picks_one_at_a_time_with_the_same_bytes() {
+        use crate::camera::ops::force_baseline;
+        use crate::image::{Image, PixelFormat};
+        let _dispatch = crate::camera::ops::dispatch_lock();
+        let mut img = Image::new(151, 37, PixelFormat::Rgb8);
+        for (i, v) in img.data.iter_mut().enumerate() {
+            *v = ((i * 31 + i / 11) % 251) as u8;
+        }
+        let p = PhaseScrambling::new(8, 151, 37, 0.26);
+        let frame = |portable: bool| {
+            force_baseline(portable);
+            let mut out = Image::with_geometry(img.geometry());
+            p.apply(&img.view(), &mut out.view_mut(), 4);
+            force_baseline(false);
+            out.data
+        };
+        let default = frame(false);
+        // (Under PERTURB_PORTABLE=1 both frames take the portable path.)
+        let env = crate::camera::ops::portable_from_env();
+        assert!(
+            env || p.single.get().is_none(),
+            "the default path planned one at a time"
+        );
+        let portable = frame(true);
+        assert!(
+            p.single.get().is_some(),
+            "the switch did not reach the transforms"
+        );
+        assert_eq!(default, portable);
+    }
 
     #[test]
     fn phase_scrambling_is_the_real_part_of_the_dft_with_random_phases() {
         // The reference's computation, written out as a direct 2-D DFT on a small plane with odd
         // and even sizes: F = DFT(x); out = Re IDFT(F e^(i theta)).
-        for (w, h) in [(6usize, 5usize), (7, 4)] {
+        // 19 rows: two bands, the second with a partial group of lanes.
+        for (w, h) in [(6usize, 5usize), (7, 4), (5, 19)] {
             let p = PhaseScrambling::new(3, w, h, 0.55);
             let x: Vec<f64> = (0..w * h).map(|i| ((i * 37) % 251) as f64).collect();
             let mut field = vec![0u16; w * h];
@@ -413,18 +590,15 @@ mod tests {
                     spec[ky * w + kx] = (re * t.cos() - im * t.sin(), re * t.sin() + im * t.cos());
                 }
             }
-            let mut buf = Buffers::default();
-            p.forward_rows(1, &mut buf, &|y, line| {
-                for (d, v) in line.iter_mut().zip(&x[y * w..(y + 1) * w]) {
-                    *d = *v as f32;
-                }
-            });
-            p.scramble_columns(1, &mut buf, 9);
-            let mut plane = vec![0f32; w * h];
-            let mut work = (Vec::new(), p.plan.c2r.make_scratch_vec());
-            for (band, out) in plane.chunks_mut(ROW_BAND * w).enumerate() {
-                p.inverse_rows(&buf, 0, band * ROW_BAND, out, &mut work);
-            }
+            let planes = [
+                scrambled_plane(&p, &p.lanes, &x, 9),
+                scrambled_plane(&p, p.single(), &x, 9),
+            ];
+            assert_eq!(
+                planes[0], planes[1],
+                "{w}x{h}: eight at a time and one at a time"
+            );
+            let plane = &planes[0];
             for y in 0..h {
                 for xx in 0..w {
                     let mut re = 0.0;

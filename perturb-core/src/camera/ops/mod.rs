@@ -9,6 +9,7 @@ mod gaussian;
 mod hsv;
 mod hsv_avx2;
 mod interleave;
+mod lanes;
 mod rows;
 mod simd;
 mod transpose;
@@ -21,6 +22,7 @@ pub use gaussian::*;
 pub use hsv::*;
 #[cfg(target_arch = "x86_64")]
 pub(crate) use interleave::{pixel_blocks, plane_blocks};
+pub use lanes::*;
 pub use rows::*;
 pub(crate) use simd::wide_fn;
 pub use simd::*;

@@ -8,9 +8,10 @@
 /// leaves the choice to the CPU, any other value forces the portable path.
 ///
 /// What it reaches: the `wide_fn!` kernels and the hand-written AVX2 kernels (all go through
-/// [`wide_available`]). The FFTs of phase scrambling (rustfft, realfft) have no choice to make:
-/// they are built with the scalar algorithms on every CPU (`camera/color/phase.rs` says why),
-/// and the float functions whose results differ between C libraries (`exp`, `ln`, `sin`, ...)
+/// [`wide_available`]), and the FFTs of phase scrambling (rustfft's and realfft's scalar
+/// algorithms on every CPU, `camera/color/phase.rs` says why), which run eight transforms at a
+/// time in SIMD registers by default and one at a time with the switch ([`portable_forced`]);
+/// the float functions whose results differ between C libraries (`exp`, `ln`, `sin`, ...)
 /// come from the `libm` crate where they decide bytes, so the portable path and the default give
 /// the same bytes on x86-64 with and without AVX2 and on aarch64; the switch lets anyone check
 /// that on their own computer (README, "aarch64").
@@ -49,6 +50,15 @@ pub fn wide_available() -> bool {
     {
         false
     }
+}
+
+/// Whether the portable path is forced in this process ([`force_baseline`] or [`PORTABLE_VAR`]),
+/// whatever the CPU: for dispatches whose fast path is not an x86-64 instruction set (phase
+/// scrambling's transforms run eight at a time on every CPU by default, one at a time when this
+/// is true, with the same bytes).
+#[inline]
+pub fn portable_forced() -> bool {
+    BASELINE_ONLY.load(std::sync::atomic::Ordering::Relaxed) || portable_from_env()
 }
 
 /// When set, [`wide_available`] is false.

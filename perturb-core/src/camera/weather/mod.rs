@@ -14,6 +14,28 @@ pub use textures::*;
 use super::ops::par_rows;
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
 
+/// How many particles a `w` x `h` frame holds when `per_frame` of them fill a `reference` frame:
+/// particles are counted per unit of image area, at a fixed size in pixels, so that they cover the
+/// same share of any frame, whatever its size and shape (rounded, at least one).
+///
+/// Every counted effect (C-C1's ice crystals, C-C2's flakes, C-C7's streaks, C-C8's drops, C-C12's
+/// flakes) uses it: the reference's per-frame count at its own size is the calibration point
+/// (PerturbationDrive's 320 x 240 for the drops and snowflakes), the sizes are those tuned at the
+/// paper's 800 x 503 ([`PARTICLE_SIZE_AT`]). A larger frame shows more particles of the same
+/// pixel size, not larger ones: the project does not know the lens, and an area density keeps
+/// the coverage (and the cost per pixel) of a severity the same on every camera.
+pub fn per_area(per_frame: f64, reference: (u32, u32), w: u32, h: u32) -> usize {
+    let area = w as f64 * h as f64;
+    let reference = (reference.0 as f64 * reference.1 as f64).max(1.0);
+    ((per_frame * area / reference).round() as usize).max(1)
+}
+
+/// The frame size at which the particles' pixel sizes were tuned (the paper's 800 x 503).
+pub const PARTICLE_SIZE_AT: (u32, u32) = (800, 503);
+
+/// PerturbationDrive's native frame, where its per-frame particle counts hold.
+pub const REFERENCE_FRAME: (u32, u32) = (320, 240);
+
 /// The overlay blend weight of the animated effects (rain, lightning, smoke, sun glare) at
 /// severities 1..5: the references' `out = (1 - i) I + i O` wherever the effect is present.
 pub const OVERLAY_WEIGHT: [f32; 5] = [0.15, 0.25, 0.40, 0.60, 0.85];

@@ -1,6 +1,6 @@
 //! Particles drawn per frame (C-C7 rain, C-C8 raindrops on the lens, C-C12 snowflakes).
 
-use super::{Blend, OVERLAY_WEIGHT, copy_frame};
+use super::{Blend, OVERLAY_WEIGHT, PARTICLE_SIZE_AT, REFERENCE_FRAME, copy_frame, per_area};
 use crate::camera::ops::par_rows;
 use crate::camera::texture::size_scale;
 use crate::camera::{CameraBuilder, CameraPerturbation, CameraSetup};
@@ -17,9 +17,10 @@ struct Streak {
     width: f32,
 }
 
-/// C-C7 rain: falling rain streaks, procedural and animated. A fixed population of streaks (density
-/// proportional to the frame area), 1-2 px wide and 10-30 px long at 800 x 503 (scaled), slanted
-/// by a wind angle within ±10 degrees drawn per seed, falls at its own speed; at frame n a streak is
+/// C-C7 rain: falling rain streaks, procedural and animated. A fixed population of streaks, one per
+/// 600 pixels of the frame ([`per_area`]: the same share of any frame covered), 1-2 px wide and
+/// 10-30 px long, slanted by a wind angle within ±10 degrees drawn per seed, falls at its own speed
+/// (relative to the frame: 25-50 px per frame at 503 rows); at frame n a streak is
 /// at its start position advanced by n x speed along the slant, wrapped around the frame, so any
 /// frame is computed from (seed, n) alone. The streaks are pale bluish and blended with the
 /// reference's overlay weight i = .15 .25 .40 .60 .85 (only the weight changes with severity, as
@@ -40,14 +41,20 @@ impl Rain {
         let k = size_scale(s.geometry.width, s.geometry.height).max(0.05);
         let mut rng = Rng::for_setup(s.seed, 0xC7);
         let slant = (rng.f32() * 20.0 - 10.0).to_radians().tan();
-        let n = ((w * h) / 600.0) as usize + 1;
+        let (sw, sh) = PARTICLE_SIZE_AT;
+        let n = per_area(
+            (sw * sh) as f64 / RAIN_PIXELS_PER_STREAK,
+            PARTICLE_SIZE_AT,
+            s.geometry.width,
+            s.geometry.height,
+        );
         let streaks = (0..n)
             .map(|_| Streak {
                 x: rng.f32() * w,
                 y: rng.f32() * h,
                 speed: (25.0 + rng.f32() * 25.0) * k,
-                len: (10.0 + rng.f32() * 20.0) * k,
-                width: (1.0 + rng.f32()) * k.max(0.5),
+                len: 10.0 + rng.f32() * 20.0,
+                width: 1.0 + rng.f32(),
             })
             .collect();
         Rain {
@@ -57,6 +64,9 @@ impl Rain {
         }
     }
 }
+
+/// C-C7 rain: one streak per this many pixels of the frame.
+pub const RAIN_PIXELS_PER_STREAK: f64 = 600.0;
 
 /// Rows per band of [`Rain`]'s drawing: a band (about 0.4 MB of a 1920-wide frame) stays in
 /// the core's cache while every streak that crosses it is drawn.
@@ -132,7 +142,8 @@ pub const SNOWFLAKES_LEVELS: [usize; 5] = [100, 200, 300, 400, 500];
 /// centre at constant speed, as the reference moves them, and grow as they come closer. Each flake
 /// has a direction, a start distance, a speed and a size; at frame n its distance from the centre
 /// is `(d0 + v n) mod R` (R the half-diagonal), so the population is stationary and any frame is
-/// computed from (seed, n) alone. Counts scale with the frame area from the reference's 100 (s + 1) at its size;
+/// computed from (seed, n) alone. Counts are per unit of image area ([`per_area`]): the
+/// reference's 100 (s + 1) per 320 x 240 frame; flakes are 1.5-4 px in radius on every frame;
 /// the reference renders each flake with its raindrop code at radius 1-3 and takes 70-460 ms per
 /// frame, here a flake is a soft disc drawn directly. All flakes have one colour, so compositing
 /// them one over the other is `out = c + (I - c) T` with `T` the product of `1 - a` over the flakes
@@ -149,8 +160,18 @@ pub struct Snowflakes {
 /// Registry constructor of C-C12.
 pub const SNOWFLAKES: CameraBuilder = |s| {
     let (w, h) = (s.geometry.width as f32, s.geometry.height as f32);
-    let k = size_scale(s.geometry.width, s.geometry.height).max(0.05);
-    let n = (SNOWFLAKES_LEVELS[s.level()] as f32 * (w * h) / (320.0 * 240.0)) as usize + 1;
+    // The flakes fill the disc around the centre (out to the half-diagonal), of which the frame
+    // shows a share that depends on its shape: the count is corrected so that the flakes the
+    // frame shows (and their growing area) are the reference's per unit of area.
+    let (rw, rh) = REFERENCE_FRAME;
+    let shown = in_frame_flake_area(rw as f64, rh as f64)
+        / in_frame_flake_area(w.max(1.0) as f64, h.max(1.0) as f64);
+    let n = per_area(
+        SNOWFLAKES_LEVELS[s.level()] as f64 * shown,
+        REFERENCE_FRAME,
+        s.geometry.width,
+        s.geometry.height,
+    );
     let mut rng = Rng::for_setup(s.seed, 0xC12);
     let flakes = (0..n)
         .map(|_| {
@@ -158,7 +179,7 @@ pub const SNOWFLAKES: CameraBuilder = |s| {
             let d0 = rng.f32() * (w * w + h * h).sqrt() / 2.0;
             // The reference moves flakes by up to 5 px per frame at 320 x 240.
             let speed = (2.0 + rng.f32() * 4.0) * (w.min(h) / 240.0);
-            let radius = (1.5 + rng.f32() * 2.5) * k;
+            let radius = 1.5 + rng.f32() * 2.5;
             (angle, d0, speed, 0.0, radius)
         })
         .collect::<Vec<_>>();
@@ -169,6 +190,25 @@ pub const SNOWFLAKES: CameraBuilder = |s| {
         .collect();
     Ok(Box::new(Snowflakes { flakes, dist, m }))
 };
+
+/// The mean, over the flakes of [`Snowflakes`] (direction uniform, distance `d` uniform in
+/// `[0, R)`, R the half-diagonal, area growing as `(1 + d / R)^2`), of the flake area a `w` x `h`
+/// frame shows: the integral over directions of `((1 + L / R)^3 - 1) / 3`, `L` the distance to the
+/// frame's edge along the direction (at most R).
+fn in_frame_flake_area(w: f64, h: f64) -> f64 {
+    let r = 0.5 * w.hypot(h);
+    let steps = 3600;
+    (0..steps)
+        .map(|k| {
+            let a = (k as f64 + 0.5) / steps as f64 * std::f64::consts::TAU;
+            let (s, c) = a.sin_cos();
+            let to_edge = (0.5 * w / c.abs().max(1e-12)).min(0.5 * h / s.abs().max(1e-12));
+            let l = to_edge.min(r) / r;
+            ((1.0 + l).powi(3) - 1.0) / 3.0
+        })
+        .sum::<f64>()
+        / steps as f64
+}
 
 impl CameraPerturbation for Snowflakes {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
@@ -239,17 +279,19 @@ impl CameraPerturbation for Snowflakes {
 /// (PerturbationDrive `effects_rain_dynamic`: respawn radius randint(1, 5 (s + 1))).
 pub const RAINDROP_MAX_RADIUS: [f32; 5] = [5.0, 10.0, 15.0, 20.0, 25.0];
 
-/// Drops on the windshield at once (the reference keeps 9 at 320 x 240; the count is per frame,
-/// independent of resolution, since drops scale with the frame).
-pub const RAINDROP_COUNT: usize = 12;
+/// Drops on the windshield at once per 320 x 240 frame (the reference keeps 9 there); a frame of
+/// another size holds as many per unit of area ([`per_area`]).
+pub const RAINDROP_COUNT: usize = 9;
 
 /// C-C8 raindrops: water drops on the windshield that refract the scene and slide down. Each drop
 /// is a circle, or a circle with a lower half-ellipse (a teardrop); it shows an inverted, minified,
 /// slightly blurred view of the scene around it (the lens a drop forms), with a darker rim, and a
 /// soft edge. Drops slide down at a speed set by their size (as the reference's 3 / 1 / 2 pixel
-/// steps) and respawn near the top with a new radius uniform in [1, r_max] (the severity); a drop's
-/// life is a fixed-period cycle, so frame n is computed from (seed, n) alone. Sizes and positions
-/// scale with the frame (the reference hard-codes 320 x 240).
+/// steps, relative to the frame's height) and respawn near the top with a new radius uniform in
+/// [1, r_max] pixels (the severity; the reference's sizes at its 320 x 240, kept in pixels on
+/// every frame); a drop's life is a fixed-period cycle, so frame n is computed from (seed, n)
+/// alone. The number of drops is per unit of image area ([`RAINDROP_COUNT`] per 320 x 240): the
+/// reference hard-codes 320 x 240.
 pub struct Raindrops {
     seed: u64,
     r_max: f32,
@@ -260,10 +302,16 @@ pub struct Raindrops {
 /// Registry constructor of C-C8.
 pub const RAINDROPS: CameraBuilder = |s| {
     let mut rng = Rng::for_setup(s.seed, 0xC8);
+    let count = per_area(
+        RAINDROP_COUNT as f64,
+        REFERENCE_FRAME,
+        s.geometry.width,
+        s.geometry.height,
+    );
     Ok(Box::new(Raindrops {
         seed: s.seed,
         r_max: RAINDROP_MAX_RADIUS[s.level()],
-        drops: (0..RAINDROP_COUNT)
+        drops: (0..count)
             .map(|_| (0.6 + rng.f32() * 1.2, rng.f32() * 10_000.0))
             .collect(),
     }))
@@ -273,9 +321,12 @@ impl CameraPerturbation for Raindrops {
     fn apply(&self, input: &ImageView<'_>, output: &mut ImageViewMut<'_>, seq: u64) {
         copy_frame(input, output);
         let (w, h) = (input.width as f32, input.height as f32);
+        // Speeds and the spawn band are relative to the frame's height; radii are in pixels. A
+        // drop's cycle is as long at every severity (room for the largest drop of any), so that
+        // the severities draw the same positions and differ only by the drops' sizes.
         let k = h / 240.0;
         let c = input.format.channels();
-        let r_top = self.r_max * k;
+        let r_top = RAINDROP_MAX_RADIUS[RAINDROP_MAX_RADIUS.len() - 1];
         for (i, &(speed, phase)) in self.drops.iter().enumerate() {
             let v = speed * k;
             let period = ((h + 3.0 * r_top) / v).max(1.0);
@@ -283,7 +334,7 @@ impl CameraPerturbation for Raindrops {
             let cycle = (t / period).floor();
             let age = t - cycle * period;
             let mut rng = Rng::for_frame(self.seed, cycle as u64, 0xC80 + i as u64);
-            let r = (1.0 + rng.f32() * (self.r_max - 1.0)).max(1.0) * k;
+            let r = (1.0 + rng.f32() * (self.r_max - 1.0)).max(1.0);
             let cx = rng.f32() * w;
             let cy = rng.f32() * 40.0 * k - r + v * age;
             let tail = if rng.chance(0.5) {

@@ -1,5 +1,6 @@
 //! Static textures blended over the frame (C-C1 frost, C-C2 snow, C-C3 fog).
 
+use super::per_area;
 use crate::camera::ops::{SaturationMap, copy_alpha, par_rows, par_rows_with};
 use crate::camera::texture::{fbm, value_noise};
 use crate::camera::{CameraBuilder, CameraPerturbation};
@@ -43,6 +44,15 @@ pub const FROST_WEIGHT: [f32; 5] = [0.15, 0.19, 0.25, 0.32, 0.40];
 /// `snow_filter`).
 pub const SNOW_WEIGHT: [f32; 5] = [0.15, 0.22, 0.30, 0.45, 0.60];
 
+/// C-C1 frost: one ice crystal per this many pixels of the frame.
+pub const FROST_PIXELS_PER_CRYSTAL: f64 = 9000.0;
+/// C-C1 frost: the length unit of a crystal's branches, pixels (503 / 120: the size at 800 x 503).
+pub const FROST_BRANCH_UNIT: f32 = 4.19;
+/// C-C2 snow: one flake sprite per this many pixels of the frame.
+pub const SNOW_PIXELS_PER_FLAKE: f64 = 1500.0;
+/// C-C2 snow: the size unit of a flake sprite, pixels (503 / 300: the size at 800 x 503).
+pub const SNOW_FLAKE_UNIT: f32 = 1.68;
+
 /// A procedural frost texture: a bluish-white base (mean about (185, 192, 203)) modulated by ridged
 /// fBm, with dendritic ice crystals grown from random nuclei (segments branching at ±60 degrees).
 pub fn frost_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
@@ -62,9 +72,15 @@ pub fn frost_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
             ]
         })
         .collect();
-    // Dendrites: bright thin branches.
+    draw_crystals(seed, w, h, &mut tex);
+    tex
+}
+
+/// Draws frost's ice crystals (dendrites: bright thin branches grown from random nuclei) into
+/// `tex`, a `w` x `h` texture: each pixel a branch crosses is brightened by 45 (40 in blue).
+pub fn draw_crystals(seed: u64, w: usize, h: usize, tex: &mut [[u8; 3]]) {
     let mut rng = Rng::for_setup(seed, 0xC1);
-    let px = |tex: &mut Vec<[u8; 3]>, x: f32, y: f32| {
+    let px = |tex: &mut [[u8; 3]], x: f32, y: f32| {
         if x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h {
             let p = &mut tex[y as usize * w + x as usize];
             *p = [
@@ -74,8 +90,10 @@ pub fn frost_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
             ];
         }
     };
-    let nuclei = (w * h / 9000).max(4);
-    let unit = (w.min(h) as f32 / 120.0).max(1.0);
+    // Crystals per unit of area, their branches as long in pixels on every frame (the lengths at
+    // the paper's 800 x 503): the same share of any frame is crystal.
+    let nuclei = per_area(FROST_PIXELS_PER_CRYSTAL.recip(), (1, 1), w as u32, h as u32);
+    let unit = FROST_BRANCH_UNIT;
     for _ in 0..nuclei {
         let (cx, cy) = (rng.f32() * w as f32, rng.f32() * h as f32);
         let mut stack: Vec<(f32, f32, f32, f32, u32)> = (0..6)
@@ -93,7 +111,7 @@ pub fn frost_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
             let steps = len.ceil() as usize;
             let (dx, dy) = (a.cos(), a.sin());
             for s in 0..steps {
-                px(&mut tex, x + dx * s as f32, y + dy * s as f32);
+                px(tex, x + dx * s as f32, y + dy * s as f32);
             }
             if depth < 3 {
                 let (ex, ey) = (x + dx * len, y + dy * len);
@@ -112,7 +130,6 @@ pub fn frost_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
             }
         }
     }
-    tex
 }
 
 /// A procedural snow texture: a vertical grey gradient (about 190 at the top to 240 at the bottom)
@@ -124,9 +141,18 @@ pub fn snow_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
             [g, g, g.saturating_add(4)]
         })
         .collect();
+    draw_snow_flakes(seed, w, h, &mut tex);
+    tex
+}
+
+/// Draws snow's flake sprites (soft white discs and six-armed stars) into `tex`, a `w` x `h`
+/// texture: each pixel a flake covers moves towards white by the flake's coverage.
+pub fn draw_snow_flakes(seed: u64, w: usize, h: usize, tex: &mut [[u8; 3]]) {
     let mut rng = Rng::for_setup(seed, 0xC2);
-    let unit = (w.min(h) as f32 / 300.0).max(1.0);
-    let flakes = (w * h) / 1500 + 8;
+    // Flakes per unit of area, as large in pixels on every frame (the sizes at the paper's
+    // 800 x 503): the same share of any frame is flake.
+    let unit = SNOW_FLAKE_UNIT;
+    let flakes = per_area(SNOW_PIXELS_PER_FLAKE.recip(), (1, 1), w as u32, h as u32);
     for _ in 0..flakes {
         let (cx, cy) = (rng.f32() * w as f32, rng.f32() * h as f32);
         let r = unit * (1.0 + rng.f32() * 3.0);
@@ -155,7 +181,6 @@ pub fn snow_texture(seed: u64, w: usize, h: usize) -> Vec<[u8; 3]> {
             }
         }
     }
-    tex
 }
 
 /// C-C1 frost / C-C2 snow: a static procedural texture T blended over the frame,

@@ -331,6 +331,17 @@ pub struct Shape {
     /// both sensor-facing faces: near 0 for an opaque body (a vehicle), larger for vegetation,
     /// bicycle racks and other things the beams pass into.
     pub interior: f32,
+    /// Share of the lower body's points within [`FACE_DEPTH`] of a sensor-facing face.
+    pub on_faces: f32,
+    /// How far apart neighbouring beams are in height at the cluster's range (metres, 0 without
+    /// a sensor model): its measured top and bottom may miss the object's by that much.
+    pub uncertainty: f32,
+    /// The median scanline residual of its points (metres, see
+    /// [`super::beams::scanline_roughness`]); computed only for clusters a vehicle's shape,
+    /// `None` otherwise or when too few points tell.
+    pub roughness: Option<f32>,
+    /// Its highest return is on the sensor's highest beam: its real top may be higher.
+    pub cut_off: bool,
 }
 
 /// How far from a visible face a point may lie and still count as on it, metres.
@@ -395,10 +406,13 @@ pub mod limits {
     /// ... and no vehicle is higher (a double-deck bus is about 4.4 m).
     pub const VEHICLE_MAX_TOP: f32 = 4.5;
     /// The visible part of a vehicle is at least this long (its rear or front seen alone).
-    pub const VEHICLE_MIN_LENGTH: f32 = 1.4;
+    pub const VEHICLE_MIN_LENGTH: f32 = 1.2;
     /// A vehicle shows at least this much depth: a single flat face is as likely a wall, a fence
     /// or a hedge.
     pub const VEHICLE_MIN_WIDTH: f32 = 0.5;
+    /// A vehicle whose visible part is longer than a car is wide (so its length shows) shows at
+    /// least this much depth.
+    pub const VEHICLE_SIDE_MIN_WIDTH: f32 = 0.7;
     /// A car or van is at most this wide (2.0 m, plus mirrors and margin); wider vehicles are
     /// trucks or buses, long and tall.
     pub const CAR_MAX_WIDTH: f32 = 2.2;
@@ -415,7 +429,11 @@ pub mod limits {
     /// ground; higher clusters hang in the air (branches, signs) or stand behind something.
     pub const VEHICLE_MAX_BOTTOM: f32 = 0.4;
     /// A vehicle's body is opaque: at most this share of its lower body's returns lie inside it.
-    pub const VEHICLE_MAX_INTERIOR: f32 = 0.1;
+    pub const VEHICLE_MAX_INTERIOR: f32 = 0.15;
+    /// A vehicle's panels are smooth: the median scanline residual of its returns (the sensor's
+    /// range noise on a smooth surface, 1 to 3 cm) is at most this, metres; foliage scatters 5
+    /// to 15 cm.
+    pub const VEHICLE_MAX_ROUGHNESS: f32 = 0.025;
     /// Pedestrians and cyclists are at most this long (a bicycle is about 1.8 m) ...
     pub const PERSON_MAX_LENGTH: f32 = 2.2;
     /// ... this wide (shoulders about 0.5 m, a cyclist's handlebars 0.6 to 0.7 m) ...
@@ -427,20 +445,22 @@ pub mod limits {
 }
 
 /// The class of a cluster from its shape (see [`limits`]); `capped` says that the cluster
-/// reaches the detector's height limit (so its real top is unknown: a tree, a building).
+/// reaches the detector's height limit (so its real top is unknown: a tree, a building). The
+/// height limits allow for the beam spacing at the cluster's range ([`Shape::uncertainty`]): a
+/// sparse sensor's highest beam on a car may pass a beam gap below its roof, its lowest above the
+/// bumper.
 pub fn classify(s: &Shape, capped: bool) -> ObjectClass {
     use limits::*;
     if capped {
         return ObjectClass::Other;
     }
-    if s.length <= PERSON_MAX_LENGTH
-        && s.width <= PERSON_MAX_WIDTH
-        && s.top >= PERSON_MIN_TOP
-        && s.top <= PERSON_MAX_TOP
-        && s.bottom <= VEHICLE_MAX_BOTTOM
-    {
-        return ObjectClass::Pedestrian;
-    }
+    let u = s.uncertainty.max(0.0);
+    let stands = s.bottom - 0.5 * u <= VEHICLE_MAX_BOTTOM;
+    // A flat face is as likely a wall's or a fence's; one as long as a car is a wall's or a
+    // fence's: a car seen from the side shows depth (its roof line, mirrors, the far side
+    // through its windows).
+    let deep_enough = s.width >= VEHICLE_MIN_WIDTH
+        && (s.length <= CAR_MAX_WIDTH || s.width >= VEHICLE_SIDE_MIN_WIDTH);
     let car_sized = s.top <= CAR_MAX_TOP && s.width <= CAR_MAX_WIDTH && s.length <= LONG;
     let van_or_truck = s.top > CAR_MAX_TOP
         && s.top <= VEHICLE_MAX_TOP
@@ -448,14 +468,28 @@ pub fn classify(s: &Shape, capped: bool) -> ObjectClass {
         && s.width >= TALL_MIN_WIDTH
         && s.width <= VEHICLE_MAX_WIDTH
         && (s.length <= LONG || s.top >= LONG_MIN_TOP);
-    if (car_sized || van_or_truck)
+    let vehicle = (car_sized || van_or_truck)
         && s.length >= VEHICLE_MIN_LENGTH
         && s.length <= MAX_LENGTH
-        && s.width >= VEHICLE_MIN_WIDTH
-        && s.top >= VEHICLE_MIN_TOP
-        && s.bottom <= VEHICLE_MAX_BOTTOM
-        && s.interior <= VEHICLE_MAX_INTERIOR
+        && deep_enough
+        && s.top + u >= VEHICLE_MIN_TOP
+        && stands
+        && s.interior <= VEHICLE_MAX_INTERIOR;
+    let smooth = s.roughness.is_some_and(|r| r <= VEHICLE_MAX_ROUGHNESS);
+    // A smooth face longer than a person is wide is a vehicle's (a car's rear seen alone is
+    // pedestrian-sized in its other dimensions; a cyclist seen from the side is not smooth).
+    if vehicle && smooth {
+        return ObjectClass::Vehicle;
+    }
+    if s.length <= PERSON_MAX_LENGTH
+        && s.width <= PERSON_MAX_WIDTH
+        && s.top + u >= PERSON_MIN_TOP
+        && s.top <= PERSON_MAX_TOP
+        && stands
     {
+        return ObjectClass::Pedestrian;
+    }
+    if vehicle && s.roughness.is_none() {
         return ObjectClass::Vehicle;
     }
     ObjectClass::Other
@@ -555,6 +589,10 @@ mod tests {
             top,
             bottom,
             interior,
+            on_faces: 1.0,
+            uncertainty: 0.0,
+            roughness: None,
+            cut_off: false,
         };
         let c = |sh: Shape| classify(&sh, false);
         assert_eq!(c(s(4.4, 1.8, 1.5, 0.2, 0.0)), ObjectClass::Vehicle); // a car

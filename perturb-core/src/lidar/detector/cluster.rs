@@ -10,6 +10,7 @@
 //! fitted on the points themselves rather than on the centroids.
 
 use super::DetectorConfig;
+use super::beams::BeamGaps;
 use crate::lidar::Points;
 
 /// Voxels and clusters of one cloud; the arrays are kept between clouds.
@@ -19,6 +20,9 @@ pub(crate) struct Clusterer {
     voxel_keys: Vec<u64>,
     radix_tmp: Vec<u64>,
     centroids: Vec<[f32; 3]>,
+    /// Per centroid, the factor its z is scaled by for the neighbour search (see
+    /// [`BeamGaps::vertical_reach`]): 1, or less where beams are far apart.
+    zscale: Vec<f32>,
     /// First sorted entry of each voxel (len = voxels + 1).
     voxel_start: Vec<u32>,
     /// DBSCAN grid.
@@ -73,16 +77,28 @@ impl Clusterer {
     }
 
     /// Clusters the points `idx` of `points` (voxels of `voxel_size`, then DBSCAN with `eps`,
-    /// `min_samples`): afterwards [`Clusterer::members`] lists each cluster's raw points.
+    /// `min_samples`): afterwards [`Clusterer::members`] lists each cluster's raw points. With
+    /// `gaps`, two centroids are neighbours within `eps` horizontally and within the vertical
+    /// reach of the sensor's beam spacing at their range ([`BeamGaps::vertical_reach`]): their z
+    /// is scaled by `eps / reach` for the search.
     pub fn run(
         &mut self,
         points: &Points,
         idx: impl Iterator<Item = u32>,
         c: &DetectorConfig,
-        voxel_size: f32,
-        eps: f32,
+        (voxel_size, eps): (f32, f32),
+        gaps: Option<&BeamGaps>,
     ) {
         self.downsample(points, idx, c, voxel_size);
+        self.zscale.clear();
+        match gaps {
+            Some(g) if !c.cluster_2d && eps > 0.0 => self.zscale.extend(
+                self.centroids
+                    .iter()
+                    .map(|&p| eps / g.vertical_reach(p, eps)),
+            ),
+            _ => self.zscale.resize(self.centroids.len(), 1.0),
+        }
         self.dbscan(c, eps);
         self.collect_members();
     }
@@ -235,7 +251,7 @@ impl Clusterer {
         (cols, rows)
     }
 
-    /// The centroids in column order (`sorted`, z scaled by `zw`), so that every neighbour scan
+    /// The centroids in column order (`sorted`, z scaled by `zw` and the centroid's `zscale`), so that every neighbour scan
     /// reads contiguous memory; and per column, the positions of its centroids ordered by height
     /// (`zorder`, `zval`), so that a neighbour query reads only the slice of each column within
     /// eps in z (the columns span the whole height of the scene). Only the search uses the height
@@ -245,7 +261,7 @@ impl Clusterer {
         self.sorted.clear();
         self.sorted.extend(self.col_items.iter().map(|&v| {
             let p = self.centroids[v as usize];
-            [p[0], p[1], p[2] * zw]
+            [p[0], p[1], p[2] * zw * self.zscale[v as usize]]
         }));
         self.zorder.clear();
         self.zorder.extend(0..self.sorted.len() as u32);
@@ -487,12 +503,12 @@ mod tests {
         push([25.0, -10.0, -0.5]);
         let c = DetectorConfig::default();
         let mut cl = Clusterer::new(&c, c.eps);
-        cl.run(&p, 0..p.len() as u32, &c, c.voxel_size, c.eps);
+        cl.run(&p, 0..p.len() as u32, &c, (c.voxel_size, c.eps), None);
         assert_eq!(cl.len(), 2);
         assert_eq!(cl.cluster(0).len(), 100);
         assert_eq!(cl.cluster(1).len(), 100);
         // A smaller eps on the same points: the voxel centroids (0.25 m apart) stay connected.
-        cl.run(&p, 0..p.len() as u32, &c, c.voxel_size, 0.3);
+        cl.run(&p, 0..p.len() as u32, &c, (c.voxel_size, 0.3), None);
         assert_eq!(cl.len(), 2);
     }
 }

@@ -16,15 +16,33 @@
 //!    [`DetectorConfig::max_height`] above it (canopies, building fronts) are ignored.
 //! 3. **Clustering** of the points above the ground ([`cluster`]): voxel centroids
 //!    ([`DetectorConfig::voxel_size`]), DBSCAN (`eps`, `min_samples`) on a uniform grid, clusters of
-//!    fewer than [`DetectorConfig::min_cluster_size`] centroids dropped.
+//!    fewer than [`DetectorConfig::min_cluster_size`] centroids dropped. Vertically, two centroids
+//!    are neighbours within the sensor's beam spacing at their range ([`beams`]): consecutive
+//!    beams of a 16- or 32-beam sensor hit a car's rear a metre apart at 30 m, and a fixed radius
+//!    would cut it into one flat piece per beam.
 //! 4. **Size filter and split**: a cluster longer than any road user
-//!    ([`DetectorConfig::max_length`], a long bus) is split by DBSCAN on its raw points with the
-//!    finer [`DetectorConfig::split_eps`] (a car parked against a hedge, a trailer next to a
-//!    fence); what is still too long is dropped (walls, fences, building fronts).
+//!    ([`DetectorConfig::max_length`], a long bus), or larger than a person without being a road
+//!    user, is split by DBSCAN on its raw points with the finer [`DetectorConfig::split_eps`] (a
+//!    car parked against a hedge, a trailer next to a fence). A part that lies along the split
+//!    cluster's main line (most of its points within 0.5 m of it) is a piece of the wall, fence or
+//!    hedge itself and is not a road user; what is still too long is dropped.
 //! 5. **Boxes** with a heading ([`boxes`]): L-shape fitting by default (the heading of a car's
 //!    visible faces), or minimum-area or axis-aligned rectangles ([`BoxFit`]), on the raw points.
+//!    A cluster that stands on the ground gets a box down to the ground (the part between its
+//!    lowest return and the road is hidden or between two beams); a vehicle's box is grown to at
+//!    least a small car's footprint away from the sensor, whose beams see only the faces turned
+//!    towards it ([`CAR_MIN_FOOTPRINT`]).
 //! 6. **Class** from the box's shape ([`boxes::classify`]): vehicle, pedestrian/cyclist-sized or
-//!    other; [`DetectorConfig::classes`] keeps only some.
+//!    other, with the height limits widened by the beam spacing at the cluster's range, and the
+//!    smoothness of its surface along the scanlines ([`beams::scanline_roughness`]: car panels are
+//!    smooth, foliage is not); a cluster reaching the height limit or the sensor's highest beam has
+//!    an unknown top and is `other`. [`DetectorConfig::classes`] keeps only some classes, and no
+//!    box lower than [`DetectorConfig::min_height`] is reported.
+//!
+//! What comes from the sensor model ([`Points::sensor`], set by [`Points::extract`]): the beam
+//! elevations (the vertical reach of the clustering, the allowance on a box's top and bottom,
+//! the highest beam), and the azimuth step (the scanline neighbours of the roughness). Nothing is
+//! tuned per file; points built without a sensor model use the fixed radii.
 //!
 //! Defaults and where they come from ([`DetectorConfig::default`]):
 //!
@@ -35,12 +53,17 @@
 //! | cell size, tolerance | 0.6 m, 0.15 m | both versions |
 //! | maximum ground slope | 0.2 (11 degrees) | this project: above the steepest road grades (about 15 %) plus noise |
 //! | pit depth | 0.5 m | this project |
-//! | maximum height above ground | 3.0 m | this project (Autoware crops at 0.1 m above the sensor) |
+//! | maximum height above ground | 4.5 m | this project (Autoware crops at 0.1 m above the sensor) |
+//! | minimum box height | 0.3 m | this project: above curbs and ground clutter (0.15-0.2 m), below any road user |
 //! | voxel | 0.25 m | `release` (PCL VoxelGrid leaf; 683f27e uses 0.08 m) |
-//! | DBSCAN | eps 0.7 m, min_samples 4, in x, y, z | `release` (683f27e: 0.6 m in x, y) |
+//! | DBSCAN | eps 0.5 m, min_samples 4, in x, y, z; vertically at least 1.5 beam gaps at the range | `release` (eps 0.7; 683f27e: 0.6 m in x, y); the vertical reach: this project |
 //! | min cluster size | 4 | `release` |
 //! | maximum length, split eps | 20 m, 0.35 m | this project (a long articulated bus is 18.75 m) |
 //! | boxes | L-shape, 1 degree steps | this project (`release`: axis-aligned, 683f27e: minimum-area) |
+//!
+//! Horizontally the radius needs no sensor-derived widening: returns along one beam are at most
+//! `r x` the azimuth step apart, under 0.5 m within the 60 m region for every supported sensor
+//! (0.08-0.4 degree steps: 0.08-0.42 m at 60 m).
 //!
 //! Deviations from the reference code (deliberate, each for a stated reason):
 //! - Ground: the reference's grid minimum with a 3 x 3 average filter and a fixed z window
@@ -74,11 +97,14 @@
 //! assert_eq!(found[0].class, ObjectClass::Vehicle);
 //! ```
 
+pub mod beams;
 pub mod boxes;
 pub mod cluster;
 pub mod ground;
 
 use crate::lidar::{Box3, Points};
+use crate::sensor_model::SensorModel;
+use beams::BeamGaps;
 use boxes::{Shape, classify};
 use cluster::Clusterer;
 use ground::Ground;
@@ -177,6 +203,9 @@ pub struct DetectorConfig {
     pub tolerance: f32,
     /// Points higher than this above the ground take no part, metres.
     pub max_height: f32,
+    /// Boxes lower than this (metres, after a box standing on the ground is extended down to
+    /// it) are not reported: curbs, ground clutter, single scanlines across the road.
+    pub min_height: f32,
     /// Voxel edge of the downsampling in metres (0 or less: no downsampling).
     pub voxel_size: f32,
     /// DBSCAN neighbourhood radius in metres.
@@ -234,6 +263,7 @@ impl Default for DetectorConfig {
             pit_depth: 0.5,
             tolerance: 0.15,
             max_height: 4.5,
+            min_height: 0.3,
             voxel_size: 0.25,
             eps: 0.5,
             min_samples: 4,
@@ -248,7 +278,8 @@ impl Default for DetectorConfig {
 }
 
 /// The clustering detector. Holds its scratch arrays, so detecting on a stream of clouds
-/// allocates little after the first one; the result depends only on the points and the config.
+/// allocates little after the first one; the result depends only on the points (and the sensor
+/// model they were read with) and the config.
 #[derive(Clone, Debug)]
 pub struct Detector {
     config: DetectorConfig,
@@ -256,7 +287,11 @@ pub struct Detector {
     clusters: Clusterer,
     splitter: Clusterer,
     scratch: FitScratch,
+    candidates: Vec<Candidate>,
     found: Vec<Detection>,
+    /// The beam gaps of the sensor model of the last points, and that model.
+    gaps: Option<BeamGaps>,
+    gaps_of: Option<SensorModel>,
 }
 
 impl Detector {
@@ -272,7 +307,10 @@ impl Detector {
             splitter: Clusterer::new(&config, config.split_eps.max(0.05)),
             config,
             scratch: FitScratch::default(),
+            candidates: Vec::new(),
             found: Vec::new(),
+            gaps: None,
+            gaps_of: None,
         }
     }
 
@@ -315,8 +353,18 @@ impl Detector {
         self.found.clone()
     }
 
+    /// The beam gaps of `points`' sensor model (kept while the model stays the same).
+    fn refresh_gaps(&mut self, points: &Points) {
+        if self.gaps_of != points.sensor {
+            self.gaps = points.sensor.as_ref().and_then(BeamGaps::new);
+            self.gaps_of = points.sensor.clone();
+        }
+    }
+
     fn run(&mut self, points: &Points) {
         self.found.clear();
+        self.refresh_gaps(points);
+        let gaps = self.gaps.as_ref();
         let c = &self.config;
         self.ground.segment(points, c);
         let (tol, top) = (c.tolerance, c.max_height);
@@ -325,16 +373,22 @@ impl Detector {
             let h = heights[i as usize];
             h > tol && h <= top
         });
-        self.clusters.run(points, objects, c, c.voxel_size, c.eps);
+        self.clusters
+            .run(points, objects, c, (c.voxel_size, c.eps), gaps);
         let min_size = c.min_cluster_size as u32;
-        let mut parts: Vec<(Box3, Shape, ObjectClass)> = Vec::new();
+        let mut parts: Vec<Candidate> = Vec::new();
+        self.candidates.clear();
+        let fit = |idx: &[u32], scratch: &mut FitScratch| {
+            let (bbox, shape) = fit(points, heights, idx, c, gaps, scratch);
+            let class = class_of(&shape, c);
+            Candidate { bbox, shape, class }
+        };
         for k in 0..self.clusters.len() {
             if self.clusters.voxels[k] < min_size {
                 continue;
             }
             let idx = self.clusters.cluster(k);
-            let (bbox, shape) = fit(points, heights, idx, c.box_fit, &mut self.scratch);
-            let class = class_of(&shape, c);
+            let Candidate { bbox, shape, class } = fit(idx, &mut self.scratch);
             let too_long = shape.length > c.max_length;
             // A cluster too long for a road user, or larger than a person without being a
             // vehicle, may be road users touching something (a car parked against a hedge or a
@@ -345,43 +399,61 @@ impl Detector {
             let try_split = c.split_eps > 0.0
                 && (too_long || (class == ObjectClass::Other && larger_than_a_person));
             if !try_split {
-                push(&mut self.found, c, bbox, shape, class);
+                self.candidates.push(Candidate { bbox, shape, class });
                 continue;
             }
             self.splitter.run(
                 points,
                 idx.iter().copied(),
                 c,
-                0.5 * c.split_eps,
-                c.split_eps,
+                (0.5 * c.split_eps, c.split_eps),
+                gaps,
             );
             parts.clear();
+            let line = StructureLine::of(points, idx, bbox.yaw, &mut self.scratch.lateral);
             for j in 0..self.splitter.len() {
                 if self.splitter.voxels[j] < min_size {
                     continue;
                 }
                 let sub = self.splitter.cluster(j);
-                let (b, sh) = fit(points, heights, sub, c.box_fit, &mut self.scratch);
-                if sh.length <= c.max_length {
-                    parts.push((b, sh, class_of(&sh, c)));
+                let mut part = fit(sub, &mut self.scratch);
+                // A part lying along the split cluster's main line is a piece of the wall, fence
+                // or hedge itself, not something standing in front of it.
+                if part.class != ObjectClass::Other && line.holds(points, sub) {
+                    part.class = ObjectClass::Other;
+                }
+                if part.shape.length <= c.max_length {
+                    parts.push(part);
                 }
             }
-            let road_user = parts.iter().any(|p| p.2 != ObjectClass::Other);
+            let road_user = parts.iter().any(|p| p.class != ObjectClass::Other);
             if too_long || road_user {
-                for &(b, sh, cl) in &parts {
-                    push(&mut self.found, c, b, sh, cl);
-                }
+                self.candidates.extend_from_slice(&parts);
             } else {
-                push(&mut self.found, c, bbox, shape, class);
+                self.candidates.push(Candidate { bbox, shape, class });
             }
+        }
+        for k in &self.candidates {
+            push(&mut self.found, c, k.bbox, k.shape, k.class);
         }
     }
 }
 
-fn class_of(shape: &Shape, c: &DetectorConfig) -> ObjectClass {
-    classify(shape, shape.top >= c.max_height - 0.05)
+/// A cluster's box, shape and class before the final filters.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    bbox: Box3,
+    shape: Shape,
+    class: ObjectClass,
 }
 
+/// The class of a cluster's shape: reaching the height limit, or cut off by the sensor's
+/// highest beam, its top is unknown (a tree, a building), which makes it `Other`.
+fn class_of(shape: &Shape, c: &DetectorConfig) -> ObjectClass {
+    classify(shape, shape.top >= c.max_height - 0.05 || shape.cut_off)
+}
+
+/// Keeps a detection of a configured class that is at least the minimum height.
 fn push(
     found: &mut Vec<Detection>,
     c: &DetectorConfig,
@@ -389,30 +461,109 @@ fn push(
     shape: Shape,
     class: ObjectClass,
 ) {
-    if c.keeps(class) {
+    if c.keeps(class) && bbox.size[2] >= c.min_height {
+        let bbox = if class == ObjectClass::Vehicle {
+            complete_vehicle(bbox)
+        } else {
+            bbox
+        };
         found.push(Detection { bbox, class, shape });
     }
 }
 
-/// The box of the points `idx` and their shape.
+/// The smallest footprint a car has (metres): a small city car is about 3.5 x 1.5 m.
+pub const CAR_MIN_FOOTPRINT: [f32; 2] = [3.5, 1.5];
+
+/// A vehicle's box grown to at least a car's footprint ([`CAR_MIN_FOOTPRINT`]) where its
+/// returns cover less: a sensor sees only the faces turned towards it (a car ahead shows its
+/// rear, a sparse sensor a part of it), so the hidden faces are moved away from the sensor and
+/// the visible ones stay where they are. The box's axis nearer the line of sight is the car's
+/// length when the visible part is no longer than a car is wide (a rear or a front seen alone).
+fn complete_vehicle(b: Box3) -> Box3 {
+    let (s, c) = b.yaw.sin_cos();
+    let axes = [[c, s], [-s, c]];
+    let sight = {
+        let n = b.center[0].hypot(b.center[1]).max(1e-6);
+        [b.center[0] / n, b.center[1] / n]
+    };
+    let along = |a: [f32; 2]| (a[0] * sight[0] + a[1] * sight[1]).abs();
+    // Which box axis is the car's length.
+    let length_axis =
+        if b.size[0] > boxes::limits::CAR_MAX_WIDTH || along(axes[0]) >= along(axes[1]) {
+            0
+        } else {
+            1
+        };
+    let mut out = b;
+    let mut center = [b.center[0], b.center[1]];
+    for (k, axis) in axes.iter().enumerate() {
+        let want = if k == length_axis {
+            CAR_MIN_FOOTPRINT[0]
+        } else {
+            CAR_MIN_FOOTPRINT[1]
+        };
+        let grow = want - b.size[k];
+        if grow <= 0.0 {
+            continue;
+        }
+        // Away from the sensor: along the axis in the direction the sensor looks.
+        let dir = if axis[0] * sight[0] + axis[1] * sight[1] >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        center[0] += 0.5 * grow * dir * axis[0];
+        center[1] += 0.5 * grow * dir * axis[1];
+        out.size[k] = want;
+    }
+    out.center[0] = center[0];
+    out.center[1] = center[1];
+    // Keep the length first and the heading in range.
+    let (ctr, size, yaw) = boxes::normalise((center, [out.size[0], out.size[1]], out.yaw));
+    out.center[0] = ctr[0];
+    out.center[1] = ctr[1];
+    out.size[0] = size[0];
+    out.size[1] = size[1];
+    out.yaw = yaw;
+    out
+}
+
+/// The box of the points `idx` and their shape. A cluster whose lowest point is near enough the
+/// ground to stand on it (within [`boxes::limits::VEHICLE_MAX_BOTTOM`] plus a beam gap) gets a
+/// box down to the ground (its tolerance above the ground under it): what is between its lowest
+/// return and the road is the object's, hidden (or between two beams).
 fn fit(
     points: &Points,
     heights: &[f32],
     idx: &[u32],
-    box_fit: BoxFit,
+    c: &DetectorConfig,
+    gaps: Option<&BeamGaps>,
     scratch: &mut FitScratch,
 ) -> (Box3, Shape) {
     let (mut zmin, mut zmax) = (f32::INFINITY, f32::NEG_INFINITY);
     let (mut hmin, mut hmax) = (f32::INFINITY, f32::NEG_INFINITY);
-    let FitScratch { xy, body, hull } = scratch;
+    let mut highest = 0usize;
+    let FitScratch {
+        xy,
+        body,
+        hull,
+        rough,
+        ..
+    } = scratch;
     xy.clear();
     body.clear();
+    // The ground under the cluster: the highest ground level under its points.
+    let mut ground = f32::NEG_INFINITY;
     for &i in idx {
         let i = i as usize;
         zmin = zmin.min(points.z[i]);
         zmax = zmax.max(points.z[i]);
         hmin = hmin.min(heights[i]);
-        hmax = hmax.max(heights[i]);
+        if heights[i] > hmax {
+            hmax = heights[i];
+            highest = i;
+        }
+        ground = ground.max(points.z[i] - heights[i]);
         xy.push([points.x[i], points.y[i]]);
         if heights[i] <= BODY_TOP {
             body.push([points.x[i], points.y[i]]);
@@ -423,7 +574,7 @@ fn fit(
     if body.len() < (xy.len() / 10).max(8) {
         body.clone_from(xy);
     }
-    let rect = match box_fit {
+    let rect = match c.box_fit {
         BoxFit::AxisAligned => boxes::normalise(boxes::axis_aligned(xy)),
         BoxFit::MinArea => {
             convex_hull(&mut xy.clone(), hull);
@@ -443,23 +594,84 @@ fn fit(
         }
     };
     let (center, size, yaw) = rect;
+    let uncertainty = gaps.map_or(0.0, |g| g.uncertainty(points.xyz(highest)));
+    if hmin <= boxes::limits::VEHICLE_MAX_BOTTOM + uncertainty && ground.is_finite() {
+        zmin = zmin.min(ground + c.tolerance);
+    }
     let bbox = Box3 {
         center: [center[0], center[1], 0.5 * (zmin + zmax)],
         size: [size[0], size[1], zmax - zmin],
         yaw,
     };
-    let shape = Shape {
+    let (on_faces, interior) = boxes::faces(body, center, yaw);
+    let mut shape = Shape {
         length: size[0],
         width: size[1],
         top: hmax,
         bottom: hmin,
-        interior: boxes::faces(body, center, yaw).1,
+        interior,
+        on_faces,
+        uncertainty,
+        roughness: None,
+        cut_off: gaps.is_some_and(|g| g.on_highest_beam(points.xyz(highest))),
     };
+    // The surface test costs a neighbour search per point: only for what would be a road user.
+    if class_of(&shape, c) != ObjectClass::Other {
+        let step = gaps.map_or(DEFAULT_AZIMUTH_STEP, BeamGaps::azimuth_step);
+        shape.roughness = beams::scanline_roughness(points, idx, step, rough);
+    }
     (bbox, shape)
 }
 
 /// Points higher above the ground than this are not used for a box's heading, metres.
 const BODY_TOP: f32 = 0.8;
+
+/// Half the thickness of a long structure's band (a wall, a fence, a hedge), metres.
+const STRUCTURE_BAND: f32 = 0.5;
+
+/// The main line of a cluster that is split (a wall, a fence, a hedge with a car in front of
+/// it): its heading, and the median of its points' offsets across that heading.
+struct StructureLine {
+    /// Unit vector across the heading.
+    across: [f32; 2],
+    /// Median offset of the cluster's points across the heading, metres.
+    median: f32,
+}
+
+impl StructureLine {
+    fn of(points: &Points, idx: &[u32], yaw: f32, lateral: &mut Vec<f32>) -> Self {
+        let (s, c) = yaw.sin_cos();
+        let across = [-s, c];
+        lateral.clear();
+        lateral.extend(idx.iter().map(|&i| {
+            let i = i as usize;
+            points.x[i] * across[0] + points.y[i] * across[1]
+        }));
+        let median = if lateral.is_empty() {
+            0.0
+        } else {
+            let mid = lateral.len() / 2;
+            *lateral.select_nth_unstable_by(mid, f32::total_cmp).1
+        };
+        StructureLine { across, median }
+    }
+
+    /// True if most of the points `idx` lie within [`STRUCTURE_BAND`] of the line.
+    fn holds(&self, points: &Points, idx: &[u32]) -> bool {
+        let on = idx
+            .iter()
+            .filter(|&&i| {
+                let i = i as usize;
+                let v = points.x[i] * self.across[0] + points.y[i] * self.across[1];
+                (v - self.median).abs() <= STRUCTURE_BAND
+            })
+            .count();
+        2 * on >= idx.len()
+    }
+}
+
+/// The azimuth step assumed for points without a sensor model (0.2 degree), radians.
+const DEFAULT_AZIMUTH_STEP: f32 = 3.49e-3;
 
 /// Scratch arrays of the box fitting.
 #[derive(Clone, Debug, Default)]
@@ -467,6 +679,8 @@ struct FitScratch {
     xy: Vec<[f32; 2]>,
     body: Vec<[f32; 2]>,
     hull: Vec<[f32; 2]>,
+    rough: beams::RoughScratch,
+    lateral: Vec<f32>,
 }
 
 /// The ground mask of `points` with the default configuration (see [`Detector::ground_mask`]).
@@ -520,6 +734,7 @@ pub fn points_in_boxes(p: &Points, boxes: &[Box3]) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sensor_model::SensorModel;
 
     fn pts(v: &[[f32; 3]]) -> Points {
         let mut p = Points::default();
@@ -656,5 +871,116 @@ mod tests {
             ..DetectorConfig::default()
         });
         assert!(d.detect(&pts(&[[5.0, 0.0, -1.0]; 8])).len() <= 1);
+    }
+
+    /// A road at z = -1.9 over x in [2, 45], y in [-8, 8] (0.25 m grid).
+    fn wide_road(v: &mut Vec<[f32; 3]>) {
+        for i in 0..172 {
+            for j in 0..64 {
+                v.push([2.0 + i as f32 * 0.25, -8.0 + j as f32 * 0.25, -1.9]);
+            }
+        }
+    }
+
+    #[test]
+    fn low_clutter_is_not_an_object_and_boxes_reach_the_ground() {
+        let mut v = Vec::new();
+        road(&mut v);
+        // A curb-like block 3 m long, 0.3 m deep, 0.2 m above the road.
+        for i in 0..30 {
+            for j in 0..4 {
+                v.push([6.0 + i as f32 * 0.1, -3.0 + j as f32 * 0.1, -1.6]);
+            }
+        }
+        // A car whose lowest returns are 0.35 m above the road (its wheels hidden).
+        for k in 0..6 {
+            let z = -1.45 + k as f32 * 0.2;
+            for i in 0..=40 {
+                v.push([12.0 + i as f32 * 0.1, 2.0, z]);
+            }
+            for j in 0..=18 {
+                v.push([12.0, 2.0 + j as f32 * 0.1, z]);
+            }
+        }
+        let p = pts(&v);
+        let found = Detector::new(DetectorConfig::default()).detect_classified(&p);
+        assert!(
+            found.iter().all(|d| d.bbox.size[2] >= 0.3),
+            "nothing lower than the minimum height: {found:?}"
+        );
+        assert!(found.iter().all(|d| (d.bbox.center[0] - 7.5).abs() > 1.0));
+        let car = found
+            .iter()
+            .find(|d| (d.bbox.center[0] - 14.0).abs() < 1.0)
+            .expect("the car");
+        // Its box stands on the road (tolerance above it), up to its highest return.
+        let bottom = car.bbox.center[2] - car.bbox.size[2] / 2.0;
+        assert!((bottom - (-1.8 + 0.15)).abs() < 0.02, "{car:?}");
+        // With a lower minimum height, the block is reported.
+        let low = Detector::new(DetectorConfig {
+            min_height: 0.0,
+            ..DetectorConfig::default()
+        })
+        .detect(&p);
+        assert!(low.iter().any(|b| (b.center[0] - 7.5).abs() < 1.0));
+    }
+
+    #[test]
+    fn sparse_beams_on_one_face_stay_one_object_with_the_sensor_model() {
+        // A van's rear, 2 m wide, 32 m ahead, as a VLP-16 (beams 2 degrees apart) scans it:
+        // three scanlines 1.1 m apart in height, at 0.2 degree steps.
+        let sensor = SensorModel::vlp16();
+        let mut v = Vec::new();
+        wide_road(&mut v);
+        for el in [-3.0f32, -1.0, 1.0] {
+            for k in 0..=35 {
+                let az = (k as f32 * 0.2 - 3.5).to_radians();
+                let x = 32.0f32;
+                v.push([x, x * az.tan(), x * el.to_radians().tan()]);
+            }
+        }
+        let mut p = pts(&v);
+        let near_van = |b: &Box3| (b.center[0] - 32.0).abs() < 2.5 && b.center[1].abs() < 2.0;
+        // Without a sensor model the scanlines are too far apart to join: three flat pieces.
+        let alone = Detector::new(DetectorConfig {
+            min_height: 0.0,
+            ..DetectorConfig::default()
+        })
+        .detect(&p);
+        assert!(
+            alone.iter().filter(|b| near_van(b)).count() >= 2,
+            "{alone:?}"
+        );
+        // With it, one object as high as the highest scanline.
+        p.sensor = Some(sensor);
+        let found = Detector::new(DetectorConfig::default()).detect_classified(&p);
+        let van: Vec<&Detection> = found.iter().filter(|d| near_van(&d.bbox)).collect();
+        assert_eq!(van.len(), 1, "{found:?}");
+        assert!(
+            van[0].shape.top > 2.3 && van[0].shape.uncertainty > 1.0,
+            "{van:?}"
+        );
+    }
+
+    #[test]
+    fn a_vehicle_seen_from_behind_gets_a_car_footprint_behind_its_rear() {
+        // The rear of a car 20 m ahead, across the line of sight: 1.6 m wide, 0.3 m deep.
+        let rear = Box3 {
+            center: [20.0, 0.0, -1.0],
+            size: [1.6, 0.3, 1.4],
+            yaw: std::f32::consts::FRAC_PI_2,
+        };
+        let b = complete_vehicle(rear);
+        assert_eq!((b.size[0], b.size[1]), (3.5, 1.6));
+        // Its rear face stays where it was seen (x = 19.85); the car extends away from the
+        // sensor.
+        assert!((b.center[0] - (19.85 + 1.75)).abs() < 1e-4, "{b:?}");
+        assert!(b.yaw.abs() < 1e-6);
+        // A whole car is left as it is.
+        let whole = Box3 {
+            size: [4.2, 1.8, 1.5],
+            ..rear
+        };
+        assert_eq!(complete_vehicle(whole).center, whole.center);
     }
 }

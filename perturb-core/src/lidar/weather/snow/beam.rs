@@ -27,6 +27,10 @@ pub enum SnowOutcome {
     Clear,
     /// Flakes in the beam, the target still detected at its range, with this intensity (0..255).
     Dimmed(f64),
+    /// No return: nothing in the beam sends back any power (the target wholly hidden by flakes
+    /// within the sensor's 0.9 m blind zone, which return nothing themselves); the sensor
+    /// reports no point for this beam.
+    Lost,
     /// A flake detected instead, at this range with this intensity (0..255).
     Flake {
         /// Range in metres.
@@ -106,11 +110,13 @@ pub fn beam_with(
     let span = C_LIGHT * TAU;
     let (best_bin, best_p) = strongest_bin(&sc.reflectors, span);
     let d_max = best_bin as f64 / 10.0 - span / 2.0;
-    if (d_max - r0).abs() < 0.2 {
+    if best_p <= 0.0 || d_max <= 0.0 {
+        SnowOutcome::Lost
+    } else if (d_max - r0).abs() < 0.2 {
         SnowOutcome::Dimmed(best_p)
     } else {
         SnowOutcome::Flake {
-            range: d_max.max(0.1),
+            range: d_max,
             intensity: best_p,
         }
     }

@@ -26,7 +26,16 @@
 //! intensity calibration (focal slope 0, as for any non-HDL-64 sensor); overlapping flakes are not
 //! rejected when the sets are generated (at these occupancies overlaps are negligible); the ground
 //! for the noise floor and the wet ground is the grid ground mask of [`crate::detector`]; the wet
-//! ground is a simplified Fresnel model (below).
+//! ground is a simplified Fresnel model (below); a beam whose light no reflector returns (the
+//! target hidden by flakes in the sensor's blind zone) gives no point, never one at a minimum
+//! range.
+//!
+//! Severity: Gunn-Marshall's size scale grows with the rate (`Lambda = 25.5 R^-0.48` per cm), so
+//! an occupancy is covered by fewer, larger flakes as the rate rises: MultiCorrupt's levels (L-A3,
+//! occupancy x9 from s1 to s3, rate x27) hold about 2.5 times fewer flakes at s3 than at s1, and a
+//! beam meets a flake about as often at every severity (the reference's users noticed the count
+//! falling with the rate: SysCV/LiDAR_snow_sim issue 26). L-A3's retention is flat within 0.01
+//! (docs/lidar.md, "Weather and severity").
 
 mod beam;
 mod flakes;
@@ -142,6 +151,8 @@ impl LidarPerturbation for HahnerSnow {
             let set = &self.sets[order[ring]];
             let az = p[1].atan2(p[0]);
             match beam_with(&mut scratch, set, az, self.half_divergence, r0, inten) {
+                // No return: the beam gives no point (never one at a minimum range).
+                SnowOutcome::Lost => continue,
                 SnowOutcome::Flake { range, intensity } => {
                     let k = (range / r0) as f32;
                     plan.emit(
@@ -229,6 +240,18 @@ mod tests {
             SnowOutcome::Clear,
             "no flake in another direction"
         );
+    }
+
+    #[test]
+    fn a_beam_hidden_by_a_flake_in_the_blind_zone_returns_nothing() {
+        // A flake 5 cm from the sensor covers the whole 3 mrad wedge; closer than 0.9 m it
+        // returns nothing itself, and the target behind it gets no light: no return at all.
+        let set = FlakeSet::new(vec![Flake {
+            azimuth: 0.0,
+            range: 0.05,
+            radius: 0.004,
+        }]);
+        assert_eq!(beam(&set, 0.0, 1.5e-3, 30.0, 200.0), SnowOutcome::Lost);
     }
 
     #[test]
