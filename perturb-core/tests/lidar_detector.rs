@@ -770,7 +770,10 @@ fn birds_eye_views_of_the_ouster_and_velodyne_captures() {
         }
         eprintln!("{name}: {} points, boxes {counts:?}", p.len());
         for d in &dets {
-            eprintln!("   {:?} {:?} {:?}", d.class, d.bbox.center, d.bbox.size);
+            eprintln!(
+                "   {:?} {:?} {:?} {:?}",
+                d.class, d.bbox.center, d.bbox.size, d.shape
+            );
         }
         let img = render(&p, &dets, &[], 1000, range);
         let png = perturb_core::formats::picture::encode_png(&img.view()).unwrap();
