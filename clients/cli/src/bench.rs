@@ -18,6 +18,7 @@ use std::path::PathBuf;
   perturb bench --modality camera --hil drive.mcap --window 10 --format markdown
   perturb bench --modality camera --encoding bayer_rggb8 --width 2064 --height 1544 --id C-C4
   perturb bench --modality camera --encoding all --id C-C4
+  perturb bench --capacity config/vehicle-perturbd.toml --width 2064 --height 1544
 
 Without --input the real KITTI frame or scan in ../shared/data is used. Times are per frame,
 after a warm-up frame; setup (tables, textures, particle sets) is reported separately.
@@ -34,8 +35,22 @@ frame is timed from ingress publish to daemon publish (what the budget applies t
 window with everything off gives the middleware (node) overhead.")]
 pub struct Args {
     /// camera or lidar.
-    #[arg(long)]
-    modality: Modality,
+    #[arg(long, required_unless_present = "capacity")]
+    modality: Option<Modality>,
+    /// Capacity report for this perturbd configuration: each stream's cost per frame on this
+    /// host and how many such streams a host of N cores sustains at their rates.
+    #[arg(long, value_name = "CONFIG", conflicts_with_all = ["modality", "hil", "encodings", "input"])]
+    capacity: Option<PathBuf>,
+    /// Camera frame rate of the capacity report (Hz).
+    #[arg(long, default_value_t = 30.0)]
+    camera_hz: f64,
+    /// LiDAR scan rate of the capacity report (Hz).
+    #[arg(long, default_value_t = 10.0)]
+    lidar_hz: f64,
+    /// Share of the cores the capacity model lets the streams take (the rest absorbs frame-time
+    /// variance, the transport and the operating system).
+    #[arg(long, default_value_t = 0.75)]
+    headroom: f64,
     /// Image width the input is scaled to (camera).
     #[arg(long, default_value_t = 1920)]
     width: u32,
@@ -176,22 +191,43 @@ fn default_input(modality: Modality) -> Result<PathBuf> {
 
 /// Runs the benchmark and prints the report.
 pub fn run(a: Args) -> Result<()> {
+    let format = if a.json { Format::Json } else { a.format };
+    if let Some(config) = &a.capacity {
+        let (image, cloud) = (
+            default_input(Modality::Camera)?,
+            default_input(Modality::Lidar)?,
+        );
+        return crate::capacity::run(
+            config,
+            &crate::capacity::Options {
+                width: a.width,
+                height: a.height,
+                camera_hz: a.camera_hz,
+                lidar_hz: a.lidar_hz,
+                frames: a.frames,
+                headroom: a.headroom,
+                image: &image,
+                cloud: &cloud,
+                format,
+            },
+        );
+    }
+    let modality = a.modality.context("--modality is needed")?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.max(1))
         .build()?;
-    let budget = a.budget_ms.unwrap_or(match a.modality {
+    let budget = a.budget_ms.unwrap_or(match modality {
         Modality::Camera => 33.0,
         Modality::Lidar => 200.0,
     });
     let selected = |id: &str| a.ids.is_empty() || a.ids.iter().any(|i| i.eq_ignore_ascii_case(id));
-    let format = if a.json { Format::Json } else { a.format };
     if let Some(bag) = &a.hil {
-        let entries: Vec<_> = of_modality(a.modality).filter(|e| selected(e.id)).collect();
+        let entries: Vec<_> = of_modality(modality).filter(|e| selected(e.id)).collect();
         if entries.is_empty() {
             bail!("no perturbation selected");
         }
         let sensor = a.sensor.as_deref().unwrap_or("vlp32c");
-        let r = crate::hil::sweep(bag, a.modality, &entries, a.window, sensor)?;
+        let r = crate::hil::sweep(bag, modality, &entries, a.window, sensor)?;
         let live = Live {
             overhead_ms: r.overhead_ms,
             dropped: &r.dropped,
@@ -200,10 +236,10 @@ pub fn run(a: Args) -> Result<()> {
     }
     let input = match &a.input {
         Some(p) => p.clone(),
-        None => default_input(a.modality)?,
+        None => default_input(modality)?,
     };
     let (rows, fits): (Vec<Timing>, Vec<Option<Fit>>);
-    match (a.modality, load(&input)?) {
+    match (modality, load(&input)?) {
         (Modality::Camera, Loaded::Image(img, _)) => {
             let frame = if (img.width, img.height) == (a.width, a.height) {
                 img

@@ -9,6 +9,7 @@ mod augment;
 mod batch;
 mod bench;
 mod campaign;
+mod capacity;
 mod ctl;
 mod demo;
 mod demo_offline;

@@ -647,3 +647,75 @@ fn a_bag_with_a_4_gib_string_length_is_reported_under_a_memory_limit() {
         "{err}"
     );
 }
+
+/// `perturb bench --capacity`: every stream of a perturbd configuration timed, its load and the
+/// counts a host sustains following the printed model.
+#[test]
+fn bench_capacity_follows_its_model_for_every_stream() {
+    let Some(data) = shared("bench_capacity") else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("perturb-capacity-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("perturbd.toml");
+    std::fs::write(
+        &cfg,
+        "[[streams]]\nname = \"cam\"\nmodality = \"camera\"\nperturbation = { id = \"C-F5\", severity = 1 }\n\
+         [[streams]]\nname = \"raw\"\nmodality = \"camera\"\n\
+         [[streams]]\nname = \"lid\"\nmodality = \"lidar\"\nsensor = \"hdl64e\"\nperturbation = { id = \"L-B1\", severity = 2 }\n",
+    )
+    .unwrap();
+    let run = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_perturb"))
+            .args(["bench", "--capacity", cfg.to_str().unwrap()])
+            .args(["--width", "200", "--height", "120", "--frames", "3"])
+            .args(extra)
+            .env("PERTURB_SHARED_DATA", &data)
+            .output()
+            .unwrap()
+    };
+    let o = run(&["--json", "--camera-hz", "20", "--headroom", "0.5"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let streams = v["streams"].as_array().unwrap();
+    let names: Vec<&str> = streams
+        .iter()
+        .map(|s| s["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["cam", "raw", "lid"]);
+    assert_eq!(streams[1]["perturbation"], "off");
+    assert_eq!(streams[0]["frame"], "200x120");
+    let mut total = 0.0;
+    for s in streams {
+        let (p50, rate) = (
+            s["cost_p50_ms"].as_f64().unwrap(),
+            s["rate_hz"].as_f64().unwrap(),
+        );
+        assert!(
+            p50 > 0.0 && p50 <= s["cost_p99_ms"].as_f64().unwrap(),
+            "{s}"
+        );
+        let load = s["load_cores"].as_f64().unwrap();
+        assert!((load - p50 * rate / 1000.0).abs() < 1e-12, "{s}");
+        total += load;
+        for pair in s["alone"].as_array().unwrap() {
+            let (n, k) = (pair[0].as_u64().unwrap(), pair[1].as_u64().unwrap());
+            assert_eq!(k, (n as f64 * 0.5 / load + 1e-9).floor() as u64, "{s}");
+        }
+    }
+    assert_eq!(streams[0]["rate_hz"], 20.0);
+    assert_eq!(streams[2]["rate_hz"], 10.0);
+    assert!((v["load_cores"].as_f64().unwrap() - total).abs() < 1e-12);
+    let copies = v["copies"].as_array().unwrap();
+    assert_eq!(copies.len(), 5);
+    let k1 = copies[0][1].as_u64().unwrap();
+    assert_eq!(k1, (0.5 / total + 1e-9).floor() as u64);
+    // The table says what the model assumes.
+    let o = run(&[]);
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(table.contains("model: one worker pool"), "{table}");
+    let o = run(&["--headroom", "1.5"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--headroom 1.5"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
