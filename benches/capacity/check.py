@@ -33,7 +33,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--bin", default="target/release")
     ap.add_argument("--id", default="C-B4")
-    ap.add_argument("--severity", type=int, default=3)
+    ap.add_argument("--severity", type=int, default=5)
     ap.add_argument("--cores", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--seconds", type=float, default=60)
     a = ap.parse_args()
