@@ -184,6 +184,8 @@ fn an_independent_foxglove_client_sees_every_channel_and_drives_the_daemon_and_a
          perturbation = { id = \"L-B1\", severity = 2, seed = 5 }\n",
     )
     .unwrap();
+    // Rates low enough that a CI machine running other tests does not starve perturbd's worker
+    // for two frame periods (its queue holds two): a drop here is then the view's doing.
     let mut daemon = ns.start_daemon(&daemon_cfg);
     let sink = ns.start_sink(&daemon_cfg, "cam", &ns.dir.join("sink"), &["--idle", "3"]);
 
@@ -193,9 +195,9 @@ fn an_independent_foxglove_client_sees_every_channel_and_drives_the_daemon_and_a
         &bridge_cfg,
         format!(
             "[bridge]\nname = \"viewtest\"\nqos = {{ subscriber_buffer = 8 }}\n\n\
-             [[synthetic.camera]]\nstream = \"cam\"\nwidth = 800\nheight = 503\nrate_hz = 20.0\nprerender = 10\n\n\
-             [[synthetic.lidar]]\nstream = \"lid\"\nrate_hz = 10.0\nprerender = 5\n\n\
-             [view]\nport = {port}\nrate_hz = 10.0\ncloud_rate_hz = 5.0\nmax_width = 640\n\
+             [[synthetic.camera]]\nstream = \"cam\"\nwidth = 800\nheight = 503\nrate_hz = 10.0\nprerender = 10\n\n\
+             [[synthetic.lidar]]\nstream = \"lid\"\nrate_hz = 5.0\nprerender = 5\n\n\
+             [view]\nport = {port}\nrate_hz = 5.0\ncloud_rate_hz = 5.0\nmax_width = 640\n\
              stats_interval_s = 0.5\nbacklog = 8\n"
         ),
     )
@@ -367,7 +369,7 @@ fn an_independent_foxglove_client_sees_every_channel_and_drives_the_daemon_and_a
         assert_eq!(s["invalid"], 0, "{s}");
     }
     let seqs: Vec<u64> = frames.iter().map(|f| f.seq).collect();
-    assert!(seqs.len() > 50, "the subscriber got {} frames", seqs.len());
+    assert!(seqs.len() > 40, "the subscriber got {} frames", seqs.len());
     assert!(
         seqs.windows(2).all(|w| w[1] == w[0] + 1),
         "the perturbed stream has gaps: {seqs:?}"
