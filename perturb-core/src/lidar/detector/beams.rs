@@ -46,6 +46,8 @@ pub struct BeamGaps {
     elevation: Vec<f32>,
     /// Per beam, the larger of the angles to its neighbours, radians.
     gap: Vec<f32>,
+    /// The largest of `gap`.
+    max_gap: f32,
     /// The azimuth step, radians.
     azimuth_step: f32,
 }
@@ -62,7 +64,7 @@ impl BeamGaps {
         if e.len() < 2 || !e.windows(2).all(|w| w[0] < w[1]) || !e.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let gap = (0..e.len())
+        let gap: Vec<f32> = (0..e.len())
             .map(|k| {
                 let below = if k > 0 { e[k] - e[k - 1] } else { 0.0 };
                 let above = if k + 1 < e.len() {
@@ -74,9 +76,11 @@ impl BeamGaps {
             })
             .collect();
         let step = sensor.azimuth_resolution_deg.to_radians();
+        let max_gap = gap.iter().copied().fold(0.0, f32::max);
         Some(BeamGaps {
             elevation: e,
             gap,
+            max_gap,
             azimuth_step: if step.is_finite() && step > 0.0 {
                 step
             } else {
@@ -114,6 +118,11 @@ impl BeamGaps {
     /// The vertical distance within which a point at `p` has clustering neighbours: `eps`, or
     /// [`VERTICAL_REACH`] beam gaps at its range if that is more.
     pub fn vertical_reach(&self, p: [f32; 3], eps: f32) -> f32 {
+        // Where even the widest gap reaches no further than eps (most points of a dense
+        // sensor), the elevation need not be looked up: the same eps.
+        if VERTICAL_REACH * (p[0].hypot(p[1]) * self.max_gap) <= eps {
+            return eps;
+        }
         (VERTICAL_REACH * self.uncertainty(p)).max(eps)
     }
 
@@ -206,6 +215,33 @@ mod tests {
         let mut one = SensorModel::vlp16();
         one.elevations_deg.truncate(1);
         assert!(BeamGaps::new(&one).is_none());
+    }
+
+    #[test]
+    fn vertical_reach_near_the_sensor_is_the_full_formula() {
+        let mut rng = crate::rng::Rng::for_setup(5, 35);
+        for sensor in [
+            SensorModel::hdl64e(),
+            SensorModel::vlp16(),
+            SensorModel::vlp32c(),
+        ] {
+            let g = BeamGaps::new(&sensor).unwrap();
+            let mut near = 0;
+            for k in 0..20_000 {
+                let r = if k % 2 == 0 { 80.0 } else { 8.0 };
+                let p = [
+                    rng.uniform(-r, r) as f32,
+                    rng.uniform(-r, r) as f32,
+                    rng.uniform(-10.0, 5.0) as f32,
+                ];
+                for eps in [0.35f32, 0.5] {
+                    let full = (VERTICAL_REACH * g.uncertainty(p)).max(eps);
+                    assert_eq!(g.vertical_reach(p, eps).to_bits(), full.to_bits(), "{p:?}");
+                    near += (full == eps) as usize;
+                }
+            }
+            assert!(near > 1000, "{}: {near}", sensor.name);
+        }
     }
 
     /// Two beams, 1/3 degree apart, scanning a face at 10 m: flat, or with depth noise.

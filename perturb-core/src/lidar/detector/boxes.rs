@@ -356,6 +356,25 @@ pub const INTERIOR_DEPTH: f32 = 0.4;
 /// points' depth from its side (not at the outermost point), so a few stray returns (a mirror,
 /// spray) do not move it.
 pub fn faces(xy: &[[f32; 2]], center: [f32; 2], yaw: f32) -> (f32, f32) {
+    faces_with(xy, center, yaw, &mut FacesScratch::default())
+}
+
+/// Scratch arrays of [`faces_with`]: the points' depths behind each face, and a copy for the
+/// percentile.
+#[derive(Clone, Debug, Default)]
+pub struct FacesScratch {
+    du: Vec<f32>,
+    dv: Vec<f32>,
+    t: Vec<f32>,
+}
+
+/// [`faces`] with its arrays kept in `sc` (the same result).
+pub fn faces_with(
+    xy: &[[f32; 2]],
+    center: [f32; 2],
+    yaw: f32,
+    sc: &mut FacesScratch,
+) -> (f32, f32) {
     if xy.is_empty() {
         return (0.0, 0.0);
     }
@@ -364,21 +383,23 @@ pub fn faces(xy: &[[f32; 2]], center: [f32; 2], yaw: f32) -> (f32, f32) {
     let su = -(center[0] * c + center[1] * s);
     let sv = -(-center[0] * s + center[1] * c);
     // Depth of every point behind each visible face's side (larger = further from the sensor).
-    let mut du: Vec<f32> = Vec::with_capacity(xy.len());
-    let mut dv: Vec<f32> = Vec::with_capacity(xy.len());
+    let FacesScratch { du, dv, t } = sc;
+    du.clear();
+    dv.clear();
     for p in xy {
         let (dx, dy) = (p[0] - center[0], p[1] - center[1]);
         du.push(-(dx * c + dy * s) * su.signum());
         dv.push(-(-dx * s + dy * c) * sv.signum());
     }
     let q = (xy.len() - 1) / 20;
-    let face = |d: &[f32]| {
-        let mut t = d.to_vec();
+    let mut face = |d: &[f32]| {
+        t.clear();
+        t.extend_from_slice(d);
         *t.select_nth_unstable_by(q, f32::total_cmp).1
     };
-    let (fu, fv) = (face(&du), face(&dv));
+    let (fu, fv) = (face(du), face(dv));
     let (mut on, mut inside) = (0usize, 0usize);
-    for (u, v) in du.iter().zip(&dv) {
+    for (u, v) in du.iter().zip(dv.iter()) {
         let (a, b) = (u - fu, v - fv);
         on += (a <= FACE_DEPTH || b <= FACE_DEPTH) as usize;
         inside += (a > INTERIOR_DEPTH && b > INTERIOR_DEPTH) as usize;

@@ -38,7 +38,10 @@ pub(crate) struct Clusterer {
     /// Per column, positions in `sorted` ordered by z, and their z.
     zorder: Vec<u32>,
     zval: Vec<f32>,
-    core: Vec<bool>,
+    /// `sorted[zorder[k]]` for every k: the neighbour scan reads the coordinates in the order
+    /// it visits them.
+    zpts: Vec<[f32; 3]>,
+    lists: NeighbourLists,
     label: Vec<i32>,
     queue: Vec<u32>,
     /// Cluster label per voxel (-1: noise).
@@ -180,15 +183,15 @@ impl Clusterer {
             col_start: &self.col_start,
             zorder: &self.zorder,
             zval: &self.zval,
+            zpts: &self.zpts,
             cols,
             rows,
             eps2: eps * eps,
             zwin: eps * 1.001 + 1e-4,
         };
         let min_samples = c.min_samples.max(1) as u32;
-        search.find_cores(min_samples, &mut self.core);
-        let column = |s: usize| self.col_of[self.col_items[s] as usize] as usize;
-        search.grow_clusters(&self.core, column, &mut self.label, &mut self.queue);
+        search.find_neighbours(min_samples, &mut self.lists);
+        Neighbours::grow_clusters(&self.lists, &mut self.label, &mut self.queue);
         // Back to voxel order.
         self.voxel_label.clear();
         self.voxel_label.resize(self.centroids.len(), -1);
@@ -279,9 +282,11 @@ impl Clusterer {
                 });
             }
         }
+        self.zpts.clear();
+        self.zpts
+            .extend(self.zorder.iter().map(|&i| self.sorted[i as usize]));
         self.zval.clear();
-        self.zval
-            .extend(self.zorder.iter().map(|&i| self.sorted[i as usize][2]));
+        self.zval.extend(self.zpts.iter().map(|p| p[2]));
     }
 
     /// Voxel counts and raw point lists per cluster (counting sort).
@@ -365,6 +370,7 @@ struct Neighbours<'a> {
     col_start: &'a [u32],
     zorder: &'a [u32],
     zval: &'a [f32],
+    zpts: &'a [[f32; 3]],
     cols: usize,
     rows: usize,
     eps2: f32,
@@ -374,66 +380,88 @@ struct Neighbours<'a> {
 }
 
 impl Neighbours<'_> {
-    /// Calls `f(t)` for every centroid position `t` within eps of the centroid at position `s`
-    /// (itself included), column by column of the 3 x 3 around its column `col`; stops early when
-    /// `f` returns false.
-    fn each(&self, s: usize, col: usize, f: &mut dyn FnMut(usize) -> bool) {
-        let p = &self.sorted[s];
-        let (cols, rows) = (self.cols, self.rows);
-        let (cx, cy) = (col / rows, col % rows);
-        for nx in cx.saturating_sub(1)..=(cx + 1).min(cols - 1) {
-            for ny in cy.saturating_sub(1)..=(cy + 1).min(rows - 1) {
-                let c = nx * rows + ny;
-                let (a, b) = (self.col_start[c] as usize, self.col_start[c + 1] as usize);
-                if a == b {
-                    continue;
-                }
-                let lo = a + self.zval[a..b].partition_point(|&z| z < p[2] - self.zwin);
-                for k in lo..b {
-                    if self.zval[k] > p[2] + self.zwin {
-                        break;
-                    }
-                    let t = self.zorder[k] as usize;
-                    let q = &self.sorted[t];
-                    let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
-                    if dx * dx + dy * dy + dz * dz <= self.eps2 && !f(t) {
-                        return;
-                    }
-                }
-            }
-        }
-    }
-
-    /// Core points: at least `min_samples` neighbours within eps, the point itself included.
-    fn find_cores(&self, min_samples: u32, core: &mut Vec<bool>) {
+    /// The neighbour lists of every centroid: the positions `t` within eps of the centroid at
+    /// position `s` (itself included), in `nb[nb_start[pos_of[s]]..nb_start[pos_of[s] + 1]]`,
+    /// and the core flags (at least `min_samples` neighbours). The centroids are visited column
+    /// by column in height order, so the start of each neighbouring column's height window
+    /// only moves up (no search per query); the window, and the distance test, are those of a
+    /// scan of the whole column.
+    fn find_neighbours(&self, min_samples: u32, lists: &mut NeighbourLists) {
+        let NeighbourLists {
+            core,
+            nb_start,
+            nb,
+            pos_of,
+        } = lists;
+        let m = self.sorted.len();
         core.clear();
-        core.resize(self.sorted.len(), false);
-        for col in 0..self.cols * self.rows {
+        core.resize(m, false);
+        pos_of.clear();
+        pos_of.resize(m, 0);
+        nb_start.clear();
+        nb_start.reserve(m + 1);
+        nb.clear();
+        let (cols, rows) = (self.cols, self.rows);
+        // Per neighbouring column: (next index to read from, end).
+        let mut near: Vec<(usize, usize)> = Vec::with_capacity(9);
+        for col in 0..cols * rows {
             let (a, b) = (
                 self.col_start[col] as usize,
                 self.col_start[col + 1] as usize,
             );
-            for (s, is_core) in core.iter_mut().enumerate().take(b).skip(a) {
-                let mut count = 0u32;
-                self.each(s, col, &mut |_| {
-                    count += 1;
-                    count < min_samples
-                });
-                *is_core = count >= min_samples;
+            if a == b {
+                continue;
+            }
+            let (cx, cy) = (col / rows, col % rows);
+            near.clear();
+            for nx in cx.saturating_sub(1)..=(cx + 1).min(cols - 1) {
+                for ny in cy.saturating_sub(1)..=(cy + 1).min(rows - 1) {
+                    let c = nx * rows + ny;
+                    let (lo, hi) = (self.col_start[c] as usize, self.col_start[c + 1] as usize);
+                    if lo < hi {
+                        near.push((lo, hi));
+                    }
+                }
+            }
+            for k in a..b {
+                let p = &self.zpts[k];
+                let s = self.zorder[k] as usize;
+                pos_of[s] = nb_start.len() as u32;
+                nb_start.push(nb.len() as u32);
+                let (below, above) = (p[2] - self.zwin, p[2] + self.zwin);
+                for (lo, hi) in near.iter_mut() {
+                    while *lo < *hi && self.zval[*lo] < below {
+                        *lo += 1;
+                    }
+                    for j in *lo..*hi {
+                        if self.zval[j] > above {
+                            break;
+                        }
+                        let q = &self.zpts[j];
+                        let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
+                        if dx * dx + dy * dy + dz * dz <= self.eps2 {
+                            nb.push(self.zorder[j]);
+                        }
+                    }
+                }
+                core[s] = (nb.len() as u32 - nb_start[nb_start.len() - 1]) >= min_samples;
             }
         }
+        nb_start.push(nb.len() as u32);
     }
 
     /// Clusters: connected core points plus the border points they reach (the first one), labelled
-    /// 0, 1, ... in seed order; -1 is noise. `column(s)` is the column of position `s`.
-    fn grow_clusters(
-        &self,
-        core: &[bool],
-        column: impl Fn(usize) -> usize,
-        label: &mut Vec<i32>,
-        queue: &mut Vec<u32>,
-    ) {
-        let m = self.sorted.len();
+    /// 0, 1, ... in seed order; -1 is noise. A cluster is every point reachable from its seed
+    /// through core points, less what an earlier cluster took: the labels do not depend on the
+    /// order in which the neighbours are listed.
+    fn grow_clusters(lists: &NeighbourLists, label: &mut Vec<i32>, queue: &mut Vec<u32>) {
+        let NeighbourLists {
+            core,
+            nb_start,
+            nb,
+            pos_of,
+        } = lists;
+        let m = core.len();
         label.clear();
         label.resize(m, -1);
         let mut next = 0i32;
@@ -445,20 +473,34 @@ impl Neighbours<'_> {
             queue.clear();
             queue.push(seed as u32);
             while let Some(s) = queue.pop() {
-                let s = s as usize;
-                self.each(s, column(s), &mut |t| {
+                let k = pos_of[s as usize] as usize;
+                for &t in &nb[nb_start[k] as usize..nb_start[k + 1] as usize] {
+                    let t = t as usize;
                     if label[t] < 0 {
                         label[t] = next;
                         if core[t] {
                             queue.push(t as u32);
                         }
                     }
-                    true
-                });
+                }
             }
             next += 1;
         }
     }
+}
+
+/// The neighbour lists of the centroids and their core flags (see
+/// [`Neighbours::find_neighbours`]); kept between clouds.
+#[derive(Clone, Debug, Default)]
+struct NeighbourLists {
+    /// Core flag per position in `sorted`.
+    core: Vec<bool>,
+    /// Start of each visited centroid's list in `nb` (len = centroids + 1).
+    nb_start: Vec<u32>,
+    /// The lists: positions in `sorted`.
+    nb: Vec<u32>,
+    /// Per position in `sorted`, its index into `nb_start`.
+    pos_of: Vec<u32>,
 }
 
 #[cfg(test)]
@@ -475,6 +517,96 @@ mod tests {
             radix_sort_high(&mut keys, &mut Vec::new());
             assert_eq!(keys, want);
         }
+    }
+
+    /// DBSCAN by the definition, over every pair: core points have at least `min` points
+    /// within eps (the same distance formula), clusters grow from the seeds in order.
+    fn dbscan_by_pairs(pts: &[[f32; 3]], eps: f32, min: u32) -> Vec<i32> {
+        let eps2 = eps * eps;
+        let near = |s: usize, t: usize| {
+            let (p, q) = (&pts[s], &pts[t]);
+            let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
+            dx * dx + dy * dy + dz * dz <= eps2
+        };
+        let n = pts.len();
+        let core: Vec<bool> = (0..n)
+            .map(|s| (0..n).filter(|&t| near(s, t)).count() as u32 >= min)
+            .collect();
+        let mut label = vec![-1i32; n];
+        let mut next = 0;
+        for seed in 0..n {
+            if !core[seed] || label[seed] >= 0 {
+                continue;
+            }
+            label[seed] = next;
+            let mut queue = vec![seed];
+            while let Some(s) = queue.pop() {
+                for t in 0..n {
+                    if near(s, t) && label[t] < 0 {
+                        label[t] = next;
+                        if core[t] {
+                            queue.push(t);
+                        }
+                    }
+                }
+            }
+            next += 1;
+        }
+        label
+    }
+
+    /// The grid search with neighbour lists labels exactly like the definition: points spread
+    /// over a few metres with many at the same height (scanlines), clumps, lone points and
+    /// distances at eps itself, in 3-D and in 2-D, with and without voxels.
+    #[test]
+    fn dbscan_labels_equal_the_pairwise_definition() {
+        let mut rng = crate::rng::Rng::for_setup(7, 35);
+        let (mut noise, mut several) = (false, false);
+        for case in 0..12 {
+            let mut p = Points::default();
+            let n = 300 + 100 * case;
+            for i in 0..n {
+                let (x, y, z) = match i % 4 {
+                    // On a 0.25 m lattice: many pairs exactly 0.5 m apart.
+                    0 => (
+                        rng.below(16) as f32 * 0.25,
+                        rng.below(16) as f32 * 0.25,
+                        rng.below(4) as f32 * 0.25 - 1.0,
+                    ),
+                    // A few shared heights.
+                    1 => (
+                        rng.uniform(0.0, 4.0) as f32,
+                        rng.uniform(-1.0, 3.0) as f32,
+                        [-0.0f32, 0.0, 0.5, -1.25][rng.below(4) as usize],
+                    ),
+                    _ => (
+                        rng.uniform(-1.0, 5.0) as f32,
+                        rng.uniform(-1.0, 5.0) as f32,
+                        rng.uniform(-2.0, 1.0) as f32,
+                    ),
+                };
+                p.x.push(x + 10.0);
+                p.y.push(y);
+                p.z.push(z);
+            }
+            let config = DetectorConfig {
+                cluster_2d: case % 3 == 2,
+                min_samples: 2 + case % 4,
+                ..DetectorConfig::default()
+            };
+            let eps = [0.5f32, 0.35, 0.7][case % 3];
+            let voxel = if case % 2 == 0 { 0.0 } else { 0.25 };
+            let mut cl = Clusterer::new(&config, eps);
+            cl.run(&p, 0..p.len() as u32, &config, (voxel, eps), None);
+            let want = dbscan_by_pairs(&cl.sorted, eps, config.min_samples as u32);
+            assert_eq!(cl.label, want, "case {case}");
+            noise |= want.contains(&-1);
+            several |= want.iter().any(|&l| l >= 1);
+        }
+        assert!(
+            noise && several,
+            "the cases have noise and several clusters"
+        );
     }
 
     #[test]

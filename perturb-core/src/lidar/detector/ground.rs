@@ -141,28 +141,28 @@ impl Ground {
             return;
         }
         const R: usize = PIT_WINDOW;
-        let mut near: Vec<f32> = Vec::with_capacity((2 * R + 1) * (2 * R + 1));
         for ix in 0..gx {
             for iy in 0..gy {
                 let own = self.cell_min[ix * gy + iy];
                 if own == f32::INFINITY {
                     continue;
                 }
-                near.clear();
+                // The cell is a pit when it is more than pit_depth below the median (the element
+                // at index n / 2 in ascending order) of its occupied neighbours. `own < v -
+                // pit_depth` only grows with v, so that holds exactly when it holds for at least
+                // the n - n / 2 largest neighbours: counting them gives the same answer as
+                // selecting the median, without the selection.
+                let (mut n, mut above) = (0usize, 0usize);
                 for jx in ix.saturating_sub(R)..=(ix + R).min(gx - 1) {
                     for jy in iy.saturating_sub(R)..=(iy + R).min(gy - 1) {
                         let v = self.cell_min[jx * gy + jy];
                         if v != f32::INFINITY && (jx, jy) != (ix, iy) {
-                            near.push(v);
+                            n += 1;
+                            above += (own < v - c.pit_depth) as usize;
                         }
                     }
                 }
-                if near.len() < 3 {
-                    continue;
-                }
-                let mid = near.len() / 2;
-                let median = *near.select_nth_unstable_by(mid, f32::total_cmp).1;
-                if own < median - c.pit_depth {
+                if n >= 3 && above >= n - n / 2 {
                     self.level[ix * gy + iy] = f32::INFINITY;
                 }
             }

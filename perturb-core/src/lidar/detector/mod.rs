@@ -548,6 +548,8 @@ fn fit(
         body,
         hull,
         rough,
+        faces,
+        copy,
         ..
     } = scratch;
     xy.clear();
@@ -577,16 +579,20 @@ fn fit(
     let rect = match c.box_fit {
         BoxFit::AxisAligned => boxes::normalise(boxes::axis_aligned(xy)),
         BoxFit::MinArea => {
-            convex_hull(&mut xy.clone(), hull);
+            copy.clone_from(xy);
+            convex_hull(copy, hull);
             boxes::normalise(min_area_rect(hull))
         }
         BoxFit::LShape => {
             // The L-shape's heading, unless the minimum-area rectangle's puts more of the body
             // points on the sensor-facing faces (returns through windows can tilt the L).
             let l = boxes::rect_at(xy, boxes::l_shape_heading(body, 1.0));
-            convex_hull(&mut body.clone(), hull);
+            copy.clone_from(body);
+            convex_hull(copy, hull);
             let m = boxes::rect_at(xy, min_area_rect(hull).2);
-            if boxes::faces(body, m.0, m.2).0 > boxes::faces(body, l.0, l.2).0 {
+            if boxes::faces_with(body, m.0, m.2, faces).0
+                > boxes::faces_with(body, l.0, l.2, faces).0
+            {
                 m
             } else {
                 l
@@ -603,7 +609,7 @@ fn fit(
         size: [size[0], size[1], zmax - zmin],
         yaw,
     };
-    let (on_faces, interior) = boxes::faces(body, center, yaw);
+    let (on_faces, interior) = boxes::faces_with(body, center, yaw, faces);
     let mut shape = Shape {
         length: size[0],
         width: size[1],
@@ -681,6 +687,9 @@ struct FitScratch {
     hull: Vec<[f32; 2]>,
     rough: beams::RoughScratch,
     lateral: Vec<f32>,
+    faces: boxes::FacesScratch,
+    /// A copy of `xy` or `body` for the convex hull (which sorts it).
+    copy: Vec<[f32; 2]>,
 }
 
 /// The ground mask of `points` with the default configuration (see [`Detector::ground_mask`]).
