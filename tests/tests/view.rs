@@ -9,11 +9,13 @@
 //! - its calls of the set / off / kill / arm services change what perturbd applies, as
 //!   `perturb ctl status` shows, and a bad request is refused with the reason;
 //! - a second client that connects and then stops reading (a hung viewer) costs the pipeline
-//!   nothing: perturbd drops no frame and a subscriber of the perturbed stream gets every one.
+//!   nothing: perturbd drops no frame and a subscriber of the perturbed stream gets every one;
+//! - a camera_info relayed by a ROS 1 ingress (rospy publishers) reaches the viewer as a
+//!   `foxglove.CameraCalibration` scaled with the JPEG (size and K).
 //!
 //! Needs node and the client's npm packages (`cd tests/tests/view_client && npm ci`, which
-//! `.ci/run` does): skipped with a message when they are missing, a failure under `CI=true` or
-//! `PERTURB_REQUIRE_ORACLES=1`.
+//! `.ci/run` does), and for the calibration Debian's ROS 1: skipped with a message when they are
+//! missing, a failure under `CI=true` or `PERTURB_REQUIRE_ORACLES=1`.
 
 use perturb_tests::{Namespace, exe, free_port, workspace};
 use serde_json::{Value, json};
@@ -388,4 +390,92 @@ fn an_independent_foxglove_client_sees_every_channel_and_drives_the_daemon_and_a
         assert_eq!(r["dropped"], 0, "{r}");
     }
     eprintln!("viewer: {report}");
+}
+
+#[test]
+fn the_view_shows_a_relayed_camera_info_scaled_to_its_jpeg() {
+    if !perturb_tests::have_ros1() {
+        return;
+    }
+    let Some(client_dir) = view_client() else {
+        return;
+    };
+    let ns = Namespace::new("view-caminfo");
+    let master = perturb_tests::Ros1Master::start(&ns.dir);
+    let port = free_port();
+    let cfg = ns.dir.join("bridge.toml");
+    // 64x48 frames shrunk by 2 to fit max_width = 32; no perturbd (the local bus): raw side only.
+    std::fs::write(
+        &cfg,
+        format!(
+            "[bridge]\nname = \"viewcal\"\nbus = \"local\"\n\n[ros1]\nhostname = \"127.0.0.1\"\n\n\
+             [[ingress]]\ntopic = \"/unperturbed/cam/image_raw\"\ntype = \"image\"\nstream = \"cam\"\ntransport = \"ros1\"\n\
+             camera_info = \"/unperturbed/cam/camera_info\"\n\n\
+             [view]\nport = {port}\nmax_width = 32\ncontrol = false\n"
+        ),
+    )
+    .unwrap();
+    let mut bridge = perturb_tests::start_bridge(&ns, Some(&master), &cfg, "bridge.log");
+    let log = ns.dir.join("bridge.log");
+    wait_listening(port, &mut bridge, &log);
+    let mut viewer = Client::start(
+        &client_dir,
+        &format!("ws://127.0.0.1:{port}"),
+        "viewer",
+        &[],
+    );
+    let ready = viewer.expect("ready", Duration::from_secs(30));
+    assert!(
+        ready["channels"].to_string().contains("/cam/camera_info"),
+        "no calibration channel: {ready}"
+    );
+    let publish = |ty: &str, topic: &str| {
+        perturb_tests::ros1_peer(
+            &master,
+            &[
+                "pub", "--topic", topic, "--type", ty, "--count", "30", "--rate", "10", "--size",
+                "64x48", "--name", ty,
+            ],
+        )
+    };
+    let mut peers = vec![
+        publish("image", "/unperturbed/cam/image_raw"),
+        publish("camera_info", "/unperturbed/cam/camera_info"),
+    ];
+    for p in &mut peers {
+        let _ = p.wait();
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    let report = viewer.report();
+    let st = perturb_wire::process::interrupt(&mut bridge, Duration::from_secs(15));
+    assert!(
+        st.is_some_and(|s| s.success()),
+        "the bridge did not stop cleanly:\n{}",
+        std::fs::read_to_string(&log).unwrap_or_default()
+    );
+    let images = &report["/cam/raw/image"];
+    assert_eq!(
+        images["images"],
+        json!({ "32x24": images["count"] }),
+        "{report}"
+    );
+    let cal = &report["/cam/camera_info"];
+    assert_eq!(cal["invalid"], 0, "{cal}");
+    assert_eq!(
+        (&cal["last"]["width"], &cal["last"]["height"]),
+        (&json!(32), &json!(24)),
+        "{cal}"
+    );
+    let k: Vec<f64> = cal["last"]["k"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no K: {cal}"))
+        .iter()
+        .filter_map(Value::as_f64)
+        .collect();
+    // The publisher's K: fx = fy = 500, cx = 32, cy = 24, halved with the image.
+    assert_eq!(
+        k,
+        [250.0, 0.0, 16.0, 0.0, 250.0, 12.0, 0.0, 0.0, 1.0],
+        "K is not scaled with the image: {cal}"
+    );
 }
