@@ -211,17 +211,17 @@ fn closeness(sample: &[[f32; 2]], theta: f32, c1: &mut [f32], c2: &mut [f32]) ->
         e[2] = e[2].min(c2[j]);
         e[3] = e[3].max(c2[j]);
     }
-    // The face of each axis the points lie closer to (smaller sum of squared distances).
-    let near_edge = |v: &[f32], lo: f32, hi: f32| {
-        let (mut dl, mut dh) = (0f32, 0f32);
-        for &x in v {
-            dl += (x - lo) * (x - lo);
-            dh += (hi - x) * (hi - x);
-        }
-        if dl <= dh { lo } else { hi }
-    };
-    let f1 = near_edge(c1, e[0], e[1]);
-    let f2 = near_edge(c2, e[2], e[3]);
+    // The face of each axis the points lie closer to (smaller sum of squared distances); the
+    // four sums in one pass, each in point order.
+    let (mut dl1, mut dh1, mut dl2, mut dh2) = (0f32, 0f32, 0f32, 0f32);
+    for (&a, &b) in c1.iter().zip(c2.iter()) {
+        dl1 += (a - e[0]) * (a - e[0]);
+        dh1 += (e[1] - a) * (e[1] - a);
+        dl2 += (b - e[2]) * (b - e[2]);
+        dh2 += (e[3] - b) * (e[3] - b);
+    }
+    let f1 = if dl1 <= dh1 { e[0] } else { e[1] };
+    let f2 = if dl2 <= dh2 { e[2] } else { e[3] };
     c1.iter()
         .zip(c2.iter())
         .map(|(a, b)| 1.0 / (a - f1).abs().min((b - f2).abs()).max(0.01))

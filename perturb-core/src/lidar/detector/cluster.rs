@@ -402,8 +402,9 @@ impl Neighbours<'_> {
         nb_start.reserve(m + 1);
         nb.clear();
         let (cols, rows) = (self.cols, self.rows);
-        // Per neighbouring column: (next index to read from, end).
-        let mut near: Vec<(usize, usize)> = Vec::with_capacity(9);
+        // Per neighbouring column: its height window [lo, end) for the current centroid, and
+        // the column's end.
+        let mut near: Vec<(usize, usize, usize)> = Vec::with_capacity(9);
         for col in 0..cols * rows {
             let (a, b) = (
                 self.col_start[col] as usize,
@@ -419,7 +420,7 @@ impl Neighbours<'_> {
                     let c = nx * rows + ny;
                     let (lo, hi) = (self.col_start[c] as usize, self.col_start[c + 1] as usize);
                     if lo < hi {
-                        near.push((lo, hi));
+                        near.push((lo, lo, hi));
                     }
                 }
             }
@@ -429,18 +430,21 @@ impl Neighbours<'_> {
                 pos_of[s] = nb_start.len() as u32;
                 nb_start.push(nb.len() as u32);
                 let (below, above) = (p[2] - self.zwin, p[2] + self.zwin);
-                for (lo, hi) in near.iter_mut() {
+                for (lo, end, hi) in near.iter_mut() {
+                    // Both ends only move up: the heights are ascending in the column and in
+                    // the window's centre.
                     while *lo < *hi && self.zval[*lo] < below {
                         *lo += 1;
                     }
-                    for j in *lo..*hi {
-                        if self.zval[j] > above {
-                            break;
-                        }
-                        let q = &self.zpts[j];
+                    *end = (*end).max(*lo);
+                    while *end < *hi && self.zval[*end] <= above {
+                        *end += 1;
+                    }
+                    let window = self.zpts[*lo..*end].iter().zip(&self.zorder[*lo..*end]);
+                    for (q, &t) in window {
                         let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
                         if dx * dx + dy * dy + dz * dz <= self.eps2 {
-                            nb.push(self.zorder[j]);
+                            nb.push(t);
                         }
                     }
                 }

@@ -152,16 +152,18 @@ impl Ground {
                 // pit_depth` only grows with v, so that holds exactly when it holds for at least
                 // the n - n / 2 largest neighbours: counting them gives the same answer as
                 // selecting the median, without the selection.
+                // Every occupied cell of the window counts, the cell itself too (it is never
+                // more than pit_depth below itself), which is taken off after.
                 let (mut n, mut above) = (0usize, 0usize);
+                let (y0, y1) = (iy.saturating_sub(R), (iy + R).min(gy - 1));
                 for jx in ix.saturating_sub(R)..=(ix + R).min(gx - 1) {
-                    for jy in iy.saturating_sub(R)..=(iy + R).min(gy - 1) {
-                        let v = self.cell_min[jx * gy + jy];
-                        if v != f32::INFINITY && (jx, jy) != (ix, iy) {
-                            n += 1;
-                            above += (own < v - c.pit_depth) as usize;
-                        }
+                    for &v in &self.cell_min[jx * gy + y0..=jx * gy + y1] {
+                        let occupied = v != f32::INFINITY;
+                        n += occupied as usize;
+                        above += (occupied && own < v - c.pit_depth) as usize;
                     }
                 }
+                n -= 1;
                 if n >= 3 && above >= n - n / 2 {
                     self.level[ix * gy + iy] = f32::INFINITY;
                 }
@@ -313,6 +315,57 @@ mod tests {
             .map(|i| g.height[i])
             .fold(0.0, f32::max);
         assert!((top - 1.5).abs() < 0.1, "{top}");
+    }
+
+    /// The pits are those of the definition: a cell more than pit_depth below the median (by
+    /// selection) of the occupied cells around it, on random grids with empty cells, ties and
+    /// deep cells.
+    #[test]
+    fn pits_are_cells_below_the_median_of_their_neighbours() {
+        let c = DetectorConfig {
+            min_x: 0.0,
+            max_x: 9.0,
+            min_y: 0.0,
+            max_y: 7.2,
+            ..DetectorConfig::default()
+        };
+        let mut rng = crate::rng::Rng::for_setup(9, 35);
+        let mut pits = 0;
+        for _ in 0..40 {
+            let mut g = Ground::new(&c);
+            let (gx, gy) = (g.gx, g.gy);
+            for v in g.cell_min.iter_mut() {
+                *v = match rng.below(6) {
+                    0 => f32::INFINITY,
+                    1 => -1.7 - 0.5 - rng.below(3) as f32 * 0.25,
+                    2 => -1.7,
+                    _ => -1.7 + (rng.f32() - 0.5) * 1.2,
+                };
+            }
+            g.remove_pits(&c);
+            for ix in 0..gx {
+                for iy in 0..gy {
+                    let own = g.cell_min[ix * gy + iy];
+                    let mut near = Vec::new();
+                    for jx in ix.saturating_sub(PIT_WINDOW)..=(ix + PIT_WINDOW).min(gx - 1) {
+                        for jy in iy.saturating_sub(PIT_WINDOW)..=(iy + PIT_WINDOW).min(gy - 1) {
+                            let v = g.cell_min[jx * gy + jy];
+                            if v != f32::INFINITY && (jx, jy) != (ix, iy) {
+                                near.push(v);
+                            }
+                        }
+                    }
+                    let pit = own != f32::INFINITY && near.len() >= 3 && {
+                        let mid = near.len() / 2;
+                        own < *near.select_nth_unstable_by(mid, f32::total_cmp).1 - c.pit_depth
+                    };
+                    let want = if pit { f32::INFINITY } else { own };
+                    assert_eq!(g.level[ix * gy + iy], want, "cell {ix},{iy}");
+                    pits += pit as usize;
+                }
+            }
+        }
+        assert!(pits > 100, "{pits}");
     }
 
     #[test]
