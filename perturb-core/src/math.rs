@@ -18,14 +18,97 @@
 //! 754 fixes their results (or rustc computes them itself). The natural logarithm is `log` (f64)
 //! and `logf` (f32), as in C.
 //!
-//! Not yet moved here (their modules were being changed when this was written): the
-//! transcendental calls in `lidar/` and `camera/weather/`; README, "aarch64", lists what that
-//! leaves open.
+//! Every transcendental call of `lidar/` and `camera/` goes through here (through [`Portable`]
+//! where the code is a method chain); the standard library's own methods are left to tests that
+//! compare with them.
 
 pub use libm::{
     atan2, atan2f, cos, cosf, exp, expf, hypot, hypotf, log, logf, pow, powf, sin, sincos, sincosf,
     sinf, tan, tanf,
 };
+
+/// The same functions as methods of `f32` and `f64`, for code written in method chains: `p` for
+/// portable, then the standard library's name (`x.psin()` for `x.sin()`, `r.ppowf(e)` for
+/// `r.powf(e)`, `v.pln()` for `v.ln()`). Each calls this module's `libm` function of its type.
+///
+/// ```
+/// use perturb_core::math::Portable;
+/// let (s, c) = 0.5f64.psin_cos();
+/// assert!((s * s + c * c - 1.0).abs() < 1e-15);
+/// assert_eq!(2.0f32.ppowf(10.0), 1024.0);
+/// ```
+pub trait Portable: Sized {
+    /// `e^self`.
+    fn pexp(self) -> Self;
+    /// Natural logarithm.
+    fn pln(self) -> Self;
+    /// `self^e`.
+    fn ppowf(self, e: Self) -> Self;
+    /// Sine (radians).
+    fn psin(self) -> Self;
+    /// Cosine (radians).
+    fn pcos(self) -> Self;
+    /// Sine and cosine (radians).
+    fn psin_cos(self) -> (Self, Self);
+    /// Tangent (radians).
+    fn ptan(self) -> Self;
+    /// Arc sine (radians).
+    fn pasin(self) -> Self;
+    /// Four-quadrant arc tangent of `self / x` (radians).
+    fn patan2(self, x: Self) -> Self;
+    /// `sqrt(self^2 + y^2)` without undue overflow.
+    fn phypot(self, y: Self) -> Self;
+    /// Cube root.
+    fn pcbrt(self) -> Self;
+}
+
+macro_rules! portable {
+    ($t:ty, $exp:ident, $log:ident, $pow:ident, $sin:ident, $cos:ident, $sincos:ident, $tan:ident,
+     $asin:ident, $atan2:ident, $hypot:ident, $cbrt:ident) => {
+        impl Portable for $t {
+            fn pexp(self) -> Self {
+                libm::$exp(self)
+            }
+            fn pln(self) -> Self {
+                libm::$log(self)
+            }
+            fn ppowf(self, e: Self) -> Self {
+                libm::$pow(self, e)
+            }
+            fn psin(self) -> Self {
+                libm::$sin(self)
+            }
+            fn pcos(self) -> Self {
+                libm::$cos(self)
+            }
+            fn psin_cos(self) -> (Self, Self) {
+                libm::$sincos(self)
+            }
+            fn ptan(self) -> Self {
+                libm::$tan(self)
+            }
+            fn pasin(self) -> Self {
+                libm::$asin(self)
+            }
+            fn patan2(self, x: Self) -> Self {
+                libm::$atan2(self, x)
+            }
+            fn phypot(self, y: Self) -> Self {
+                libm::$hypot(self, y)
+            }
+            fn pcbrt(self) -> Self {
+                libm::$cbrt(self)
+            }
+        }
+    };
+}
+
+portable!(
+    f64, exp, log, pow, sin, cos, sincos, tan, asin, atan2, hypot, cbrt
+);
+portable!(
+    f32, expf, logf, powf, sinf, cosf, sincosf, tanf, asinf, atan2f, hypotf, cbrtf
+);
 
 #[cfg(test)]
 mod tests {

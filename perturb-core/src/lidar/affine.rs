@@ -12,6 +12,7 @@
 
 use super::local::{BOXES, InBox, write_plan};
 use super::{Box3, LidarBuilder, LidarFrame, LidarPerturbation, Needs, Plan, Points};
+use crate::math::Portable;
 use crate::rng::Rng;
 
 /// A box's normalised frame.
@@ -30,7 +31,7 @@ impl BoxFrame {
     pub fn new(b: &Box3) -> Self {
         let m = b.size.iter().fold(0f32, |a, v| a.max(*v)) as f64;
         let m = if m > 0.0 && m.is_finite() { m } else { 1.0 };
-        let (sin, cos) = (b.yaw as f64).sin_cos();
+        let (sin, cos) = (b.yaw as f64).psin_cos();
         BoxFrame {
             c: b.center.map(|v| v as f64),
             cos,
@@ -245,7 +246,7 @@ impl LidarPerturbation for Rotation {
         let rng = Rng::for_frame(self.seed, frame.seq, 0xE3);
         per_box(points, frame.boxes, rng, plan, |r, _, pts| {
             let beta = (r.uniform(c - 1.0, c + 1.0) * sign(r)).to_radians();
-            let (s, co) = beta.sin_cos();
+            let (s, co) = beta.psin_cos();
             for p in pts.iter_mut() {
                 let [x, y, _] = *p;
                 p[0] = x * co - y * s;
@@ -275,7 +276,7 @@ mod tests {
             assert!((back[a] - p[a]).abs() < 1e-5);
         }
         // The box's front-left-top corner maps to (+half_x, +half_y, +half_z).
-        let (s, c) = 0.7f32.sin_cos();
+        let (s, c) = 0.7f32.psin_cos();
         let corner = [12.0 + 2.0 * c - 1.0 * s, -3.0 + 2.0 * s + 1.0 * c, -0.25];
         let q = f.to_norm(corner);
         assert!(

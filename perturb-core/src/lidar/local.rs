@@ -16,6 +16,7 @@
 //!   other columns), which it also jitters and uses in its distances.
 
 use super::{Box3, LidarBuilder, LidarFrame, LidarPerturbation, Needs, Plan, Points};
+use crate::math::Portable;
 use crate::rng::Rng;
 
 /// No box.
@@ -153,7 +154,7 @@ impl BoxGrid {
 /// a hair larger so rounding never drops a point that [`Box3::contains`] accepts); `None` for a
 /// box with a non-finite size or position.
 fn footprint(b: &Box3) -> Option<[f32; 4]> {
-    let (s, c) = b.yaw.sin_cos();
+    let (s, c) = b.yaw.psin_cos();
     let hx = 0.5 * (b.size[0] * c.abs() + b.size[1] * s.abs()) * 1.0001 + 1e-4;
     let hy = 0.5 * (b.size[0] * s.abs() + b.size[1] * c.abs()) * 1.0001 + 1e-4;
     let r = [

@@ -9,6 +9,7 @@
 //! driver adds) passes through byte for byte, whatever the point_step, offsets or byte order.
 //! Output is a pure function of (input, perturbation, severity, seed, sequence number).
 
+use crate::math::Portable;
 pub mod affine;
 pub mod detector;
 pub mod local;
@@ -68,7 +69,7 @@ impl Box3 {
             return false;
         }
         let (dx, dy) = (p[0] - self.center[0], p[1] - self.center[1]);
-        let (s, c) = self.yaw.sin_cos();
+        let (s, c) = self.yaw.psin_cos();
         let lx = dx * c + dy * s;
         let ly = dy * c - dx * s;
         lx.abs() <= self.size[0] * 0.5 && ly.abs() <= self.size[1] * 0.5

@@ -2,6 +2,7 @@
 
 use super::local::{BOXES, InBox, write_plan};
 use super::{LidarBuilder, LidarFrame, LidarPerturbation, Needs, Plan, Points};
+use crate::math::Portable;
 use crate::rng::{Rng, for_each_normal_triple};
 
 /// L-F1 motion_blur: the motion scale s in metres, MultiCorrupt levels 1..3 (`pts_motion`).
@@ -63,7 +64,7 @@ pub struct SpatialMisalignment {
 /// Rx(a) Ry(a) Rz(a) for one angle `a` in radians, with the usual right-handed matrices
 /// (`Rz(a) = [[cos a, -sin a, 0], [sin a, cos a, 0], [0, 0, 1]]`).
 pub fn rotation_xyz(a: f64) -> [[f32; 3]; 3] {
-    let (s, c) = a.sin_cos();
+    let (s, c) = a.psin_cos();
     let rx = [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]];
     let ry = [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]];
     let rz = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
@@ -162,7 +163,7 @@ impl LidarPerturbation for MovingObject {
             if m.is_empty() {
                 continue;
             }
-            let (s, c) = (bx.yaw as f64).sin_cos();
+            let (s, c) = (bx.yaw as f64).psin_cos();
             let u = |i: u32| points.x[i as usize] as f64 * c + points.y[i as usize] as f64 * s;
             let (lo, hi) = m
                 .iter()
@@ -233,7 +234,7 @@ impl LidarPerturbation for GhostPoints {
         plan.keep_all(points.len());
         let inbox = InBox::new(points, frame.boxes);
         for (b, bx) in frame.boxes.iter().enumerate() {
-            let (s, c) = bx.yaw.sin_cos();
+            let (s, c) = bx.yaw.psin_cos();
             for j in 1..=self.copies {
                 let d = j as f32 * self.spacing;
                 let f = self.dim.powi(j as i32);

@@ -2,6 +2,7 @@
 
 use crate::cloud::{CloudView, FieldReader, names};
 use crate::error::{Error, Result};
+use crate::math::Portable;
 use crate::sensor_model::{Axes, SensorModel};
 use rayon::prelude::*;
 
@@ -114,7 +115,7 @@ impl Points {
                     self.ring_table = RingTable::new(sensor);
                 }
                 let (x, y, z) = (&self.x, &self.y, &self.z);
-                let elevation = |i: usize| z[i].atan2((x[i] * x[i] + y[i] * y[i]).sqrt());
+                let elevation = |i: usize| z[i].patan2((x[i] * x[i] + y[i] * y[i]).sqrt());
                 match &self.ring_table {
                     Some(t) => ring.extend((0..n).map(|i| t.ring_of_elevation(elevation(i)))),
                     None => ring.extend((0..n).map(|i| sensor.ring_of_elevation(elevation(i)))),
@@ -658,7 +659,7 @@ mod tests {
     fn ring_is_derived_from_elevation_when_absent() {
         let layout = PointLayout::xyzi_f32();
         let d = 10.0f32;
-        let low = (-25.0f32).to_radians().tan() * d;
+        let low = (-25.0f32).to_radians().ptan() * d;
         let cloud = Cloud::from_xyzi(&layout, &[[d, 0.0, low, 0.0], [d, 0.0, 0.0, 0.0]]);
         let pts = Points::extract(&cloud.view(), &SensorModel::vlp32c(), true).unwrap();
         assert!(pts.ring_derived);

@@ -1,6 +1,7 @@
 //! Sensor family (L-B): points lost or filtered by the sensor itself.
 
 use super::{LidarBuilder, LidarFrame, LidarPerturbation, Plan, Points};
+use crate::math::Portable;
 use crate::rng::Rng;
 
 /// L-B1 density_decrease: fraction of the points deleted, 3D-Corruptions-AD levels 1..5
@@ -58,7 +59,7 @@ pub const FOV_FILTER: LidarBuilder = |s| {
 impl LidarPerturbation for FovFilter {
     fn plan(&self, points: &Points, _frame: &LidarFrame<'_>, plan: &mut Plan) {
         for i in 0..points.len() {
-            if points.y[i].atan2(points.x[i]).abs() <= self.half_angle {
+            if points.y[i].patan2(points.x[i]).abs() <= self.half_angle {
                 plan.keep(i);
             }
         }
@@ -481,8 +482,8 @@ mod tests {
                 rng.uniform(2.0, 15.0)
             };
             let a = rng.uniform(0.0, std::f64::consts::TAU);
-            p.x.push((r * a.cos()) as f32);
-            p.y.push((r * a.sin()) as f32);
+            p.x.push((r * a.pcos()) as f32);
+            p.y.push((r * a.psin()) as f32);
             p.z.push(rng.uniform(-2.0, 1.0) as f32);
         }
         p.x[17] = f32::NAN;

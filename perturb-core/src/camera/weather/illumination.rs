@@ -5,6 +5,7 @@ use crate::camera::ops::par_rows;
 use crate::camera::pointwise::{ByteMap, scale_value};
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut};
+use crate::math::Portable;
 use crate::rng::Rng;
 
 /// The HSV value scaled by a factor and truncated, `V' = min(255, floor(V f))`, hue and
@@ -95,8 +96,8 @@ pub const SUN_GLARE: CameraBuilder = |s| {
     let radial = (0..64 * 64 * 4)
         .map(|d2| {
             let d = (d2 as f32).sqrt() / 64.0; // in units of the core radius
-            let core = (-(d * d) / 0.5).exp();
-            let halo = 0.55 * (-d / 3.0).exp();
+            let core = (-(d * d) / 0.5).pexp();
+            let halo = 0.55 * (-d / 3.0).pexp();
             (core + halo).min(1.0)
         })
         .collect();
@@ -117,8 +118,8 @@ impl CameraPerturbation for SunGlare {
             rng.f32() * 100.0,
         );
         let t = seq as f32 + phase;
-        let sx = (bx + 0.06 * (t / 90.0).sin()) * w;
-        let sy = (by + 0.03 * (t / 130.0).cos()) * h;
+        let sx = (bx + 0.06 * (t / 90.0).psin()) * w;
+        let sy = (by + 0.03 * (t / 130.0).pcos()) * h;
         let core = 0.16 * w.min(h);
         let format = input.format;
         let c = format.channels();
@@ -129,13 +130,13 @@ impl CameraPerturbation for SunGlare {
         let streak_h = 0.02 * h;
         // The streak's horizontal falloff, per column.
         let falloff: Vec<f32> = (0..input.width)
-            .map(|x| (-((x as f32 - sx).abs() / w) * 1.5).exp())
+            .map(|x| (-((x as f32 - sx).abs() / w) * 1.5).pexp())
             .collect();
         // Beyond this many pixels from the sun the radial table is 0.
         let reach = (table.len() as f32 * unit2).sqrt().ceil() + 1.0;
         par_rows(input, output, |y, src, dst| {
             let dy = y as f32 - sy;
-            let streak_v = (-(dy * dy) / (2.0 * streak_h * streak_h)).exp();
+            let streak_v = (-(dy * dy) / (2.0 * streak_h * streak_h)).pexp();
             // Where neither the streak nor the radial profile reaches, coverage rounds to 0.
             let streak_off = streak_v * 0.9 * wgt * 256.0 < 1.0;
             let (x0, x1) = if !streak_off {

@@ -5,6 +5,7 @@ use crate::camera::ops::{apply_lut, par_rows};
 use crate::camera::texture::size_scale;
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut};
+use crate::math::Portable;
 use crate::rng::Rng;
 use rayon::prelude::*;
 
@@ -91,7 +92,7 @@ fn glow_stamp(core: f32, glow: f32) -> Vec<StampRow> {
                     let (cov, is_core) = if d <= core {
                         (1.0, true)
                     } else {
-                        let g = (-(d - core).powi(2) / (2.0 * (glow / 2.5).powi(2))).exp() * 0.12;
+                        let g = (-(d - core).powi(2) / (2.0 * (glow / 2.5).powi(2))).pexp() * 0.12;
                         (g, false)
                     };
                     (cov > 0.01).then_some((dx, cov, is_core))

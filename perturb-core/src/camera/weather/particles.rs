@@ -5,6 +5,7 @@ use crate::camera::ops::par_rows;
 use crate::camera::texture::size_scale;
 use crate::camera::{CameraBuilder, CameraPerturbation, CameraSetup};
 use crate::image::{ImageView, ImageViewMut};
+use crate::math::Portable;
 use crate::rng::Rng;
 use rayon::prelude::*;
 
@@ -40,7 +41,7 @@ impl Rain {
         let (w, h) = (s.geometry.width as f32, s.geometry.height as f32);
         let k = size_scale(s.geometry.width, s.geometry.height).max(0.05);
         let mut rng = Rng::for_setup(s.seed, 0xC7);
-        let slant = (rng.f32() * 20.0 - 10.0).to_radians().tan();
+        let slant = (rng.f32() * 20.0 - 10.0).to_radians().ptan();
         let (sw, sh) = PARTICLE_SIZE_AT;
         let n = per_area(
             (sw * sh) as f64 / RAIN_PIXELS_PER_STREAK,
@@ -196,12 +197,12 @@ pub const SNOWFLAKES: CameraBuilder = |s| {
 /// frame shows: the integral over directions of `((1 + L / R)^3 - 1) / 3`, `L` the distance to the
 /// frame's edge along the direction (at most R).
 fn in_frame_flake_area(w: f64, h: f64) -> f64 {
-    let r = 0.5 * w.hypot(h);
+    let r = 0.5 * w.phypot(h);
     let steps = 3600;
     (0..steps)
         .map(|k| {
             let a = (k as f64 + 0.5) / steps as f64 * std::f64::consts::TAU;
-            let (s, c) = a.sin_cos();
+            let (s, c) = a.psin_cos();
             let to_edge = (0.5 * w / c.abs().max(1e-12)).min(0.5 * h / s.abs().max(1e-12));
             let l = to_edge.min(r) / r;
             ((1.0 + l).powi(3) - 1.0) / 3.0
@@ -225,7 +226,7 @@ impl CameraPerturbation for Snowflakes {
             .iter()
             .map(|&(angle, d0, speed, _, radius)| {
                 let d = (d0 + speed * (seq % 1_000_000) as f32).rem_euclid(reach);
-                let (x, y) = (cx + angle.cos() * d, cy + angle.sin() * d);
+                let (x, y) = (cx + angle.pcos() * d, cy + angle.psin() * d);
                 // Flakes grow as they come closer.
                 (y as i64, x as i64, radius * (1.0 + d / reach))
             })

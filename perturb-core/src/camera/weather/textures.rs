@@ -5,6 +5,7 @@ use crate::camera::ops::{SaturationMap, copy_alpha, par_rows, par_rows_with};
 use crate::camera::texture::{fbm, value_noise};
 use crate::camera::{CameraBuilder, CameraPerturbation};
 use crate::image::{ImageView, ImageViewMut, PixelFormat};
+use crate::math::Portable;
 use crate::rng::Rng;
 use rayon::prelude::*;
 
@@ -109,7 +110,7 @@ pub fn draw_crystals(seed: u64, w: usize, h: usize, tex: &mut [[u8; 3]]) {
             .collect();
         while let Some((x, y, a, len, depth)) = stack.pop() {
             let steps = len.ceil() as usize;
-            let (dx, dy) = (a.cos(), a.sin());
+            let (dx, dy) = (a.pcos(), a.psin());
             for s in 0..steps {
                 px(tex, x + dx * s as f32, y + dy * s as f32);
             }
@@ -166,8 +167,8 @@ pub fn draw_snow_flakes(seed: u64, w: usize, h: usize, tex: &mut [[u8; 3]]) {
                 }
                 let d = ((dx * dx + dy * dy) as f32).sqrt();
                 let a = if star {
-                    let ang = (dy as f32).atan2(dx as f32);
-                    let arm = ((ang * 3.0).cos().abs()).powf(40.0);
+                    let ang = (dy as f32).patan2(dx as f32);
+                    let arm = ((ang * 3.0).pcos().abs()).ppowf(40.0);
                     (arm * (1.0 - d / (2.5 * r))).max((1.0 - d / (0.7 * r)).max(0.0))
                 } else {
                     (1.0 - d / r).max(0.0)

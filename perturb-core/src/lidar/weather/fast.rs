@@ -46,6 +46,7 @@
 use super::super::{LidarBuilder, LidarFrame, LidarPerturbation, Plan, Points};
 use super::lisa::{R_MAX_M, R_MIN_M};
 use super::unit_intensity;
+use crate::math::Portable;
 use crate::rng::Rng;
 
 /// Which lightweight model.
@@ -92,9 +93,9 @@ pub const WAVELENGTH_NM: f64 = 905.0;
 /// `(5.42e-5 lambda + 5.4958776) S^1.38` dB/km for dry snow.
 pub fn extinction(kind: FastKind, value: f64) -> f64 {
     match kind {
-        FastKind::Fog => 20f64.ln() / value,
-        FastKind::Rain => 1.076 * value.powf(0.67) * DB_PER_KM,
-        FastKind::Snow => (5.42e-5 * WAVELENGTH_NM + 5.495_877_6) * value.powf(1.38) * DB_PER_KM,
+        FastKind::Fog => 20f64.pln() / value,
+        FastKind::Rain => 1.076 * value.ppowf(0.67) * DB_PER_KM,
+        FastKind::Snow => (5.42e-5 * WAVELENGTH_NM + 5.495_877_6) * value.ppowf(1.38) * DB_PER_KM,
     }
 }
 
@@ -164,11 +165,11 @@ impl FastWeather {
     pub fn survival(&self, d: f64, i: f64) -> f64 {
         if let Some(floor) = self.floor
             && d > R_MIN_M
-            && i * (-self.alpha * d).exp() < floor * d * d
+            && i * (-self.alpha * d).pexp() < floor * d * d
         {
             return 0.0;
         }
-        (-self.alpha * self.exposure(d, i)).exp()
+        (-self.alpha * self.exposure(d, i)).pexp()
     }
 
     /// Expected retention over a cloud.
@@ -239,7 +240,7 @@ impl LidarPerturbation for Fast {
                 continue;
             }
             if u < m.survival(d, inten) {
-                let att = (-m.alpha * d).exp();
+                let att = (-m.alpha * d).pexp();
                 match &points.intensity {
                     Some(v) => plan.dimmed(i, (v[i] as f64 * att) as f32),
                     None => plan.keep(i),
@@ -263,7 +264,7 @@ mod tests {
     #[test]
     fn extinction_follows_the_cited_laws() {
         // Koschmieder: 5 % contrast at the MOR.
-        assert!((extinction(FastKind::Fog, 50.0) * 50.0 - 20f64.ln()).abs() < 1e-12);
+        assert!((extinction(FastKind::Fog, 50.0) * 50.0 - 20f64.pln()).abs() < 1e-12);
         // 1.076 R^0.67 dB/km: 25 mm/h -> 9.30 dB/km.
         assert!((extinction(FastKind::Rain, 25.0) / DB_PER_KM - 9.30).abs() < 0.01);
         // Dry snow at 905 nm: a = 5.5449, 1 mm/h -> 5.545 dB/km.
@@ -290,7 +291,7 @@ mod tests {
         assert_eq!(rain.survival(40.0, 0.05), 0.0);
         assert!(fog.survival(40.0, 0.05) > 0.0);
         // A bright one at the same range survives with e^(-alpha d).
-        let want = (-rain.alpha * 40.0).exp();
+        let want = (-rain.alpha * 40.0).pexp();
         assert!((rain.survival(40.0, 0.9) - want).abs() < 1e-12);
     }
 }

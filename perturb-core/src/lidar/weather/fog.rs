@@ -24,6 +24,7 @@
 
 use super::super::{LidarBuilder, LidarFrame, LidarPerturbation, Plan, Points};
 use super::C_LIGHT;
+use crate::math::Portable;
 use crate::rng::Rng;
 
 /// 3D-Corruptions-AD's extinction coefficients (per metre) at levels 1..5; severities 1, 2, 3 use
@@ -67,7 +68,11 @@ impl FogTable {
             })
             .collect();
         let pulse: Vec<f64> = (0..SAMPLES)
-            .map(|k| (std::f64::consts::PI * k as f64 * dt / t_end).sin().powi(2))
+            .map(|k| {
+                (std::f64::consts::PI * k as f64 * dt / t_end)
+                    .psin()
+                    .powi(2)
+            })
             .collect();
         let r_grid: Vec<f64> = (0..2000).map(|k| 200.0 * k as f64 / 1999.0).collect();
         let keys = (r0_max * 10.0).round() as usize + 1;
@@ -89,7 +94,7 @@ impl FogTable {
                             continue;
                         }
                         acc +=
-                            weights[k] * pulse[k] * (-2.0 * alpha * rp).exp() * xi(rp) / (rp * rp);
+                            weights[k] * pulse[k] * (-2.0 * alpha * rp).pexp() * xi(rp) / (rp * rp);
                     }
                     let p = acc * dt / 3.0;
                     if p > best.1 {
@@ -145,7 +150,7 @@ impl FogModel {
     pub fn hahner(alpha: f64) -> Self {
         FogModel {
             alpha,
-            beta: 0.046 * alpha / 20f64.ln(),
+            beta: 0.046 * alpha / 20f64.pln(),
             noise: 1.0,
             clamp: true,
             table: FogTable::compute(alpha, 10.0),
@@ -171,7 +176,7 @@ impl FogModel {
     /// The deterministic part: the fog peak and whether it wins over the attenuated hard return
     /// (intensity `i` on 0..255, range `r0`).
     pub fn decide(&self, r0: f64, i: f64) -> (f64, f64, f64, bool) {
-        let hard = (i * (-2.0 * self.alpha * r0).exp()).round();
+        let hard = (i * (-2.0 * self.alpha * r0).pexp()).round();
         let (r_fog, peak) = self.table.lookup(r0);
         let fog = peak * i * r0 * r0 * self.beta / (GAMMA / std::f64::consts::PI);
         (hard, r_fog, fog, fog > hard)

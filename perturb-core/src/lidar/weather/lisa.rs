@@ -32,6 +32,7 @@
 
 use super::super::{LidarBuilder, LidarFrame, LidarPerturbation, Plan, Points};
 use super::unit_intensity;
+use crate::math::Portable;
 use crate::rng::Rng;
 
 /// Rain rates in mm/h of 3D-Corruptions-AD's five levels; severities 1, 2, 3 use levels 1, 3, 5.
@@ -74,13 +75,13 @@ impl Medium {
     /// The medium of `kind` at rain rate `rate` mm/h.
     pub fn new(kind: Precipitation, rate: f64) -> Self {
         let (n0, lambda, m): (f64, f64, f64) = match kind {
-            Precipitation::Snow => (7.6e3 * rate.powf(-0.87), 2.55 * rate.powf(-0.48), 1.3031),
-            Precipitation::Rain => (8000.0, 4.1 * rate.powf(-0.21), 1.328),
+            Precipitation::Snow => (7.6e3 * rate.ppowf(-0.87), 2.55 * rate.ppowf(-0.48), 1.3031),
+            Precipitation::Rain => (8000.0, 4.1 * rate.ppowf(-0.21), 1.328),
         };
         Medium {
             n0,
             lambda,
-            density: n0 * (-lambda * D_MIN_MM).exp() / lambda,
+            density: n0 * (-lambda * D_MIN_MM).pexp() / lambda,
             fresnel: ((m - 1.0) / (m + 1.0)).powi(2),
             alpha: std::f64::consts::PI * 1e-6 * n0 / lambda.powi(3),
         }
@@ -164,27 +165,28 @@ impl Lisa {
         // the sampling of another rate happened to consume. The distribution is unchanged.
         let noise = rng.normal();
         let (mut counts, mut particles) = (rng.fork(1), rng.fork(2));
-        let p_hard = i * (-2.0 * m.alpha * r).exp() / (r * r);
+        let p_hard = i * (-2.0 * m.alpha * r).pexp() / (r * r);
         let threshold = self.p_min.max(p_hard);
         // Only particles closer than rho_lim can beat the threshold.
         let rho_lim = (m.fresnel / threshold).sqrt().min(r);
         let mut best: Option<(f64, f64)> = None;
         if rho_lim > R_MIN_M {
-            let tan_half = self.theta.tan();
+            let tan_half = self.theta.ptan();
             let volume = std::f64::consts::PI / 3.0 * r * (tan_half * r / 2.0).powi(2);
             let mean = m.density * volume;
             let whole = mean.floor();
             let count = whole as u64 + counts.chance(mean - whole) as u64;
             let near = counts.binomial(count, (rho_lim / r).powi(3));
             for _ in 0..near {
-                let rho = rho_lim * particles.f64().cbrt();
+                let rho = rho_lim * particles.f64().pcbrt();
                 let d = D_MIN_MM + particles.exponential(1.0 / m.lambda);
                 if rho <= R_MIN_M {
                     continue;
                 }
                 let beam_mm = self.theta * 1e3 * rho;
-                let p = m.fresnel * (-2.0 * m.alpha * rho).exp() * ((d / beam_mm).powi(2)).min(1.0)
-                    / (rho * rho);
+                let p =
+                    m.fresnel * (-2.0 * m.alpha * rho).pexp() * ((d / beam_mm).powi(2)).min(1.0)
+                        / (rho * rho);
                 if best.is_none_or(|(bp, _)| p > bp) {
                     best = Some((p, rho));
                 }
@@ -206,7 +208,7 @@ impl Lisa {
         let sigma = 0.09 / (2.0 * p_hard / self.p_min).max(1e-12).sqrt();
         Outcome::Kept {
             range: r + noise * sigma.min(1.0),
-            intensity: i * (-2.0 * m.alpha * r).exp(),
+            intensity: i * (-2.0 * m.alpha * r).pexp(),
         }
     }
 }

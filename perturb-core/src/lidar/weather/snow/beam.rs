@@ -4,6 +4,7 @@
 use super::TAU;
 use super::flakes::FlakeSet;
 use crate::lidar::weather::C_LIGHT;
+use crate::math::Portable;
 
 /// Buffers [`beam`] reuses from point to point.
 #[derive(Default)]
@@ -141,7 +142,7 @@ fn strongest_bin(reflectors: &[(f64, f64)], span: f64) -> (i64, f64) {
         reflectors
             .iter()
             .filter(|(rk, _)| rb >= *rk && rb <= rk + span)
-            .map(|(rk, ak)| ak * (pi * (rb - rk) / span).sin().powi(2))
+            .map(|(rk, ak)| ak * (pi * (rb - rk) / span).psin().powi(2))
             .sum()
     };
     // An upper bound of `power(b)`: sin^2 t <= t^2, <= (pi - t)^2, and, with d = |t - pi/2|,
@@ -295,7 +296,7 @@ mod tests {
                 let p: f64 = reflectors
                     .iter()
                     .filter(|(rk, _)| rb >= *rk && rb <= rk + span)
-                    .map(|(rk, ak)| ak * (std::f64::consts::PI * (rb - rk) / span).sin().powi(2))
+                    .map(|(rk, ak)| ak * (std::f64::consts::PI * (rb - rk) / span).psin().powi(2))
                     .sum();
                 if p > best_p {
                     best_p = p;
@@ -359,7 +360,7 @@ mod tests {
             let mut got: Vec<(f32, f32, f32)> = sc.cand.iter().map(|c| (c.0, c.1, c.2)).collect();
             let mut want = Vec::new();
             for f in &set.flakes {
-                let a = (f.radius / f.range).min(1.0).asin();
+                let a = (f.radius / f.range).min(1.0).pasin();
                 if (f.range as f64) >= r0 {
                     continue;
                 }

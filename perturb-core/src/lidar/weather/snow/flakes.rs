@@ -2,6 +2,7 @@
 //! indexed in range tiers for the wedge search.
 
 use super::R0;
+use crate::math::Portable;
 use crate::rng::Rng;
 
 /// One flake disk of a beam's set.
@@ -119,7 +120,7 @@ impl FlakeSet {
             .map(|(k, f)| Entry {
                 azimuth: f.azimuth,
                 range: f.range,
-                half: (f.radius / f.range).min(1.0).asin(),
+                half: (f.radius / f.range).min(1.0).pasin(),
                 k: k as u32,
             })
             .collect();
@@ -148,7 +149,7 @@ impl FlakeSet {
 /// in the sphere, until their area reaches `occ` of the disc; disks covering the sensor are
 /// rejected.
 pub fn flake_set(rng: &mut Rng, rr: f64, occ: f64) -> FlakeSet {
-    let lambda = 25.5 * rr.powf(-0.48);
+    let lambda = 25.5 * rr.ppowf(-0.48);
     let mean_mm = 10.0 / lambda;
     let target = occ * std::f64::consts::PI * R0 * R0;
     let mut area = 0.0;

@@ -2,6 +2,7 @@
 //! wet road's dimming.
 
 use crate::lidar::Points;
+use crate::math::Portable;
 
 /// The noise floor: 0.7 of a quadratic fit, over distance, of the weakest ground returns (the 5th
 /// percentile of each 2 m distance bin), on 0..255. Without enough ground it is 0.
@@ -71,8 +72,8 @@ pub fn noise_floor(points: &Points, ground: &[bool], to255: f64) -> [f64; 3] {
 /// is scaled by the two-way transmittance (1 - R(theta))^2.
 pub fn wet_ground_factor(theta: f64) -> f64 {
     let n = 1.33f64;
-    let ci = theta.cos().clamp(0.0, 1.0);
-    let st = theta.sin() / n;
+    let ci = theta.pcos().clamp(0.0, 1.0);
+    let st = theta.psin() / n;
     let ct = (1.0 - st * st).max(0.0).sqrt();
     let rs = ((ci - n * ct) / (ci + n * ct)).powi(2);
     let rp = ((ct - n * ci) / (ct + n * ci)).powi(2);

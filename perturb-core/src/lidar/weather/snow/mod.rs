@@ -37,6 +37,7 @@
 //! falling with the rate: SysCV/LiDAR_snow_sim issue 26). L-A3's retention is flat within 0.01
 //! (docs/lidar.md, "Weather and severity").
 
+use crate::math::Portable;
 mod beam;
 mod flakes;
 mod ground;
@@ -142,14 +143,14 @@ impl LidarPerturbation for HahnerSnow {
             let mut changed = false;
             if self.wet_ground && ground[i] {
                 let theta = ((p[0] * p[0] + p[1] * p[1]).sqrt() as f64)
-                    .atan2(-p[2] as f64)
+                    .patan2(-p[2] as f64)
                     .abs();
                 inten *= wet_ground_factor(theta.min(std::f64::consts::FRAC_PI_2));
                 changed = true;
             }
             let ring = rings.map_or(0, |r| r[i] as usize) % self.sets.len();
             let set = &self.sets[order[ring]];
-            let az = p[1].atan2(p[0]);
+            let az = p[1].patan2(p[0]);
             match beam_with(&mut scratch, set, az, self.half_divergence, r0, inten) {
                 // No return: the beam gives no point (never one at a minimum range).
                 SnowOutcome::Lost => continue,
