@@ -18,9 +18,9 @@
 //! 754 fixes their results (or rustc computes them itself). The natural logarithm is `log` (f64)
 //! and `logf` (f32), as in C.
 //!
-//! Every transcendental call of `lidar/` and `camera/` goes through here (through [`Portable`]
-//! where the code is a method chain); the standard library's own methods are left to tests that
-//! compare with them.
+//! Every transcendental call of `lidar/` (the detector included) and `camera/` goes through
+//! here (through [`Portable`] where the code is a method chain); the standard library's own
+//! methods are left to tests that compare with them.
 
 pub use libm::{
     atan2, atan2f, cos, cosf, exp, expf, hypot, hypotf, log, logf, pow, powf, sin, sincos, sincosf,

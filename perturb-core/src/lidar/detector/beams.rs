@@ -21,6 +21,7 @@
 //! can merge two real lasers (KITTI's HDL-64E), and a ring field may be absent.
 
 use crate::lidar::Points;
+use crate::math::Portable;
 use crate::sensor_model::SensorModel;
 
 /// How far (as a multiple of the beam gap at its range) a point may reach vertically to a
@@ -108,11 +109,11 @@ impl BeamGaps {
     /// How far apart in height neighbouring beams hit a vertical face through `p` (sensor at
     /// the origin, metres): horizontal range times the gap at `p`'s elevation.
     pub fn uncertainty(&self, p: [f32; 3]) -> f32 {
-        let r = p[0].hypot(p[1]);
+        let r = p[0].phypot(p[1]);
         if !(r.is_finite() && p[2].is_finite()) {
             return 0.0;
         }
-        r * self.at(p[2].atan2(r))
+        r * self.at(p[2].patan2(r))
     }
 
     /// The vertical distance within which a point at `p` has clustering neighbours: `eps`, or
@@ -120,7 +121,7 @@ impl BeamGaps {
     pub fn vertical_reach(&self, p: [f32; 3], eps: f32) -> f32 {
         // Where even the widest gap reaches no further than eps (most points of a dense
         // sensor), the elevation need not be looked up: the same eps.
-        if VERTICAL_REACH * (p[0].hypot(p[1]) * self.max_gap) <= eps {
+        if VERTICAL_REACH * (p[0].phypot(p[1]) * self.max_gap) <= eps {
             return eps;
         }
         (VERTICAL_REACH * self.uncertainty(p)).max(eps)
@@ -129,12 +130,12 @@ impl BeamGaps {
     /// True if `p` lies on the sensor's highest beam (within half its gap): an object whose
     /// highest return is there may reach higher than the sensor sees.
     pub fn on_highest_beam(&self, p: [f32; 3]) -> bool {
-        let r = p[0].hypot(p[1]);
+        let r = p[0].phypot(p[1]);
         let (top, gap) = (
             self.elevation[self.elevation.len() - 1],
             self.gap[self.gap.len() - 1],
         );
-        p[2].atan2(r) >= top - 0.5 * gap
+        p[2].patan2(r) >= top - 0.5 * gap
     }
 
     /// The sensor's azimuth step, radians.
@@ -164,8 +165,8 @@ pub fn scanline_roughness(
     polar.extend(idx.iter().map(|&i| {
         let i = i as usize;
         let (x, y, z) = (points.x[i], points.y[i], points.z[i]);
-        let h = x.hypot(y);
-        (y.atan2(x), z.atan2(h), (h * h + z * z).sqrt())
+        let h = x.phypot(y);
+        (y.patan2(x), z.patan2(h), (h * h + z * z).sqrt())
     }));
     // A cluster never spans the +-pi seam in a way that matters here: one that does (behind
     // the sensor) loses the neighbours across the seam only.
@@ -252,11 +253,11 @@ mod tests {
             for k in 0..100 {
                 let az = (k as f32 * 0.1 - 5.0).to_radians();
                 // A flat wall at x = 10.
-                let mut r = 10.0 / az.cos() / el.to_radians().cos();
+                let mut r = 10.0 / az.pcos() / el.to_radians().pcos();
                 r += noise * (rng.f32() * 2.0 - 1.0);
-                let (h, z) = (r * el.to_radians().cos(), r * el.to_radians().sin());
-                p.x.push(h * az.cos());
-                p.y.push(h * az.sin());
+                let (h, z) = (r * el.to_radians().pcos(), r * el.to_radians().psin());
+                p.x.push(h * az.pcos());
+                p.y.push(h * az.psin());
                 p.z.push(z);
             }
         }

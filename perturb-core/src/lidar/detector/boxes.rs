@@ -2,6 +2,7 @@
 //! L-shape fitting (search-based, closeness criterion) and a class from the box's shape.
 
 use super::ObjectClass;
+use crate::math::Portable;
 
 /// Axis-aligned rectangle: (centre, [extent x, extent y], heading 0).
 pub fn axis_aligned(xy: &[[f32; 2]]) -> ([f32; 2], [f32; 2], f32) {
@@ -158,7 +159,7 @@ pub fn min_area_rect(hull: &[[f32; 2]]) -> ([f32; 2], [f32; 2], f32) {
         std::mem::swap(&mut l, &mut w);
         u = [-u[1], u[0]];
     }
-    let mut yaw = u[1].atan2(u[0]);
+    let mut yaw = u[1].patan2(u[0]);
     if yaw > std::f64::consts::FRAC_PI_2 {
         yaw -= std::f64::consts::PI;
     } else if yaw <= -std::f64::consts::FRAC_PI_2 {
@@ -196,7 +197,7 @@ pub fn l_shape_rect(xy: &[[f32; 2]], step_deg: f32) -> ([f32; 2], [f32; 2], f32)
 /// The closeness criterion of [`l_shape_heading`] at orientation `theta` (`c1`, `c2`: scratch of
 /// the sample's length).
 fn closeness(sample: &[[f32; 2]], theta: f32, c1: &mut [f32], c2: &mut [f32]) -> f32 {
-    let (s, c) = theta.sin_cos();
+    let (s, c) = theta.psin_cos();
     let mut e = [
         f32::INFINITY,
         f32::NEG_INFINITY,
@@ -275,7 +276,7 @@ pub fn rect_at(xy: &[[f32; 2]], yaw: f32) -> ([f32; 2], [f32; 2], f32) {
     let Some(&o) = xy.first() else {
         return ([0.0; 2], [0.0; 2], 0.0);
     };
-    let (s, c) = (yaw as f64).sin_cos();
+    let (s, c) = (yaw as f64).psin_cos();
     let mut e = [
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -378,7 +379,7 @@ pub fn faces_with(
     if xy.is_empty() {
         return (0.0, 0.0);
     }
-    let (s, c) = yaw.sin_cos();
+    let (s, c) = yaw.psin_cos();
     // The sensor in the box frame: the visible face of each axis is the one on its side.
     let su = -(center[0] * c + center[1] * s);
     let sv = -(-center[0] * s + center[1] * c);
@@ -521,7 +522,7 @@ mod tests {
     use super::*;
 
     fn rect_points(center: [f32; 2], l: f32, w: f32, yaw: f32, fill: bool) -> Vec<[f32; 2]> {
-        let (s, c) = yaw.sin_cos();
+        let (s, c) = yaw.psin_cos();
         let mut xy = Vec::new();
         let (nl, nw) = ((l * 10.0) as i32, (w * 10.0) as i32);
         for i in 0..=nl {
@@ -568,10 +569,10 @@ mod tests {
             let center = [15.0f32, 4.0];
             let all = rect_points(center, 4.5, 1.8, yaw, false);
             // Keep the perimeter points nearer the sensor than the car's centre, beyond a margin.
-            let d0 = center[0].hypot(center[1]);
+            let d0 = center[0].phypot(center[1]);
             let seen: Vec<[f32; 2]> = all
                 .into_iter()
-                .filter(|p| p[0].hypot(p[1]) < d0 - 0.2)
+                .filter(|p| p[0].phypot(p[1]) < d0 - 0.2)
                 .collect();
             let (_, size, got) = l_shape_rect(&seen, 1.0);
             assert!(
@@ -585,7 +586,7 @@ mod tests {
         // Every point is inside the box.
         let xy = rect_points([3.0, -7.0], 3.0, 1.2, 0.3, true);
         let (c, size, yaw) = l_shape_rect(&xy, 1.0);
-        let (s, co) = yaw.sin_cos();
+        let (s, co) = yaw.psin_cos();
         for p in &xy {
             let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
             assert!((dx * co + dy * s).abs() <= size[0] / 2.0 + 1e-4);

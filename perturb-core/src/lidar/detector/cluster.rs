@@ -383,8 +383,8 @@ impl Neighbours<'_> {
     /// The neighbour lists of every centroid: the positions `t` within eps of the centroid at
     /// position `s` (itself included), in `nb[nb_start[pos_of[s]]..nb_start[pos_of[s] + 1]]`,
     /// and the core flags (at least `min_samples` neighbours). The centroids are visited column
-    /// by column in height order, so the start of each neighbouring column's height window
-    /// only moves up (no search per query); the window, and the distance test, are those of a
+    /// by column in height order, so both ends of each neighbouring column's height window
+    /// only move up (no search per query); the window, and the distance test, are those of a
     /// scan of the whole column.
     fn find_neighbours(&self, min_samples: u32, lists: &mut NeighbourLists) {
         let NeighbourLists {
@@ -459,12 +459,7 @@ impl Neighbours<'_> {
     /// through core points, less what an earlier cluster took: the labels do not depend on the
     /// order in which the neighbours are listed.
     fn grow_clusters(lists: &NeighbourLists, label: &mut Vec<i32>, queue: &mut Vec<u32>) {
-        let NeighbourLists {
-            core,
-            nb_start,
-            nb,
-            pos_of,
-        } = lists;
+        let core = &lists.core;
         let m = core.len();
         label.clear();
         label.resize(m, -1);
@@ -477,8 +472,7 @@ impl Neighbours<'_> {
             queue.clear();
             queue.push(seed as u32);
             while let Some(s) = queue.pop() {
-                let k = pos_of[s as usize] as usize;
-                for &t in &nb[nb_start[k] as usize..nb_start[k + 1] as usize] {
+                for &t in lists.of(s as usize) {
                     let t = t as usize;
                     if label[t] < 0 {
                         label[t] = next;
@@ -505,6 +499,14 @@ struct NeighbourLists {
     nb: Vec<u32>,
     /// Per position in `sorted`, its index into `nb_start`.
     pos_of: Vec<u32>,
+}
+
+impl NeighbourLists {
+    /// The neighbours of the centroid at position `s` in `sorted` (itself included).
+    fn of(&self, s: usize) -> &[u32] {
+        let k = self.pos_of[s] as usize;
+        &self.nb[self.nb_start[k] as usize..self.nb_start[k + 1] as usize]
+    }
 }
 
 #[cfg(test)]

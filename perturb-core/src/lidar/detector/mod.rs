@@ -97,6 +97,7 @@
 //! assert_eq!(found[0].class, ObjectClass::Vehicle);
 //! ```
 
+use crate::math::Portable;
 pub mod beams;
 pub mod boxes;
 pub mod cluster;
@@ -480,10 +481,10 @@ pub const CAR_MIN_FOOTPRINT: [f32; 2] = [3.5, 1.5];
 /// the visible ones stay where they are. The box's axis nearer the line of sight is the car's
 /// length when the visible part is no longer than a car is wide (a rear or a front seen alone).
 fn complete_vehicle(b: Box3) -> Box3 {
-    let (s, c) = b.yaw.sin_cos();
+    let (s, c) = b.yaw.psin_cos();
     let axes = [[c, s], [-s, c]];
     let sight = {
-        let n = b.center[0].hypot(b.center[1]).max(1e-6);
+        let n = b.center[0].phypot(b.center[1]).max(1e-6);
         [b.center[0] / n, b.center[1] / n]
     };
     let along = |a: [f32; 2]| (a[0] * sight[0] + a[1] * sight[1]).abs();
@@ -646,7 +647,7 @@ struct StructureLine {
 
 impl StructureLine {
     fn of(points: &Points, idx: &[u32], yaw: f32, lateral: &mut Vec<f32>) -> Self {
-        let (s, c) = yaw.sin_cos();
+        let (s, c) = yaw.psin_cos();
         let across = [-s, c];
         lateral.clear();
         lateral.extend(idx.iter().map(|&i| {
@@ -711,7 +712,7 @@ pub fn points_in_boxes(p: &Points, boxes: &[Box3]) -> Vec<usize> {
     let pre: Vec<Pre> = boxes
         .iter()
         .map(|b| {
-            let (s, c) = b.yaw.sin_cos();
+            let (s, c) = b.yaw.psin_cos();
             let h = [b.size[0] * 0.5, b.size[1] * 0.5, b.size[2] * 0.5];
             Pre {
                 ctr: b.center,
@@ -805,7 +806,7 @@ mod tests {
         assert_eq!(cars.len(), 2, "{found:?}");
         for (d, want) in cars.iter().zip([[12.0f32, 7.1], [16.1, -3.15]]) {
             let b = d.bbox;
-            let off = (b.center[0] - want[0]).hypot(b.center[1] - want[1]);
+            let off = (b.center[0] - want[0]).phypot(b.center[1] - want[1]);
             assert!(off < 0.3, "{b:?} vs {want:?}");
             assert!(b.yaw.abs() < 0.03, "{b:?}");
         }
@@ -945,7 +946,7 @@ mod tests {
             for k in 0..=35 {
                 let az = (k as f32 * 0.2 - 3.5).to_radians();
                 let x = 32.0f32;
-                v.push([x, x * az.tan(), x * el.to_radians().tan()]);
+                v.push([x, x * az.ptan(), x * el.to_radians().ptan()]);
             }
         }
         let mut p = pts(&v);
