@@ -109,6 +109,20 @@ pub fn run(config: &Path, o: &Options<'_>) -> Result<()> {
     let Loaded::Cloud(cloud, kind, _) = load(o.cloud)? else {
         bail!("{}: not a point cloud", o.cloud.display());
     };
+    // One thread: the cost of a frame on one core, whatever this host has.
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    one.install(|| measure(&cfg, o, &image, &cloud, kind))
+        .and_then(|report| print(&report, config, o.format))
+}
+
+/// Every stream's cost and counts (on the calling thread's pool).
+fn measure(
+    cfg: &perturbd::Config,
+    o: &Options<'_>,
+    image: &perturb_core::image::Image,
+    cloud: &perturb_core::cloud::Cloud,
+    kind: perturb_core::formats::FileKind,
+) -> Result<Capacity> {
     let mut streams = Vec::new();
     for s in &cfg.streams {
         let (timing, frame, rate) = match s.modality {
@@ -172,7 +186,7 @@ pub fn run(config: &Path, o: &Options<'_>) -> Result<()> {
     }
     let total: f64 = streams.iter().map(|s| s.load_cores).sum();
     let all_fit = streams.iter().all(|s| s.fits_period);
-    let report = Capacity {
+    Ok(Capacity {
         load_cores: total,
         headroom: o.headroom,
         copies: CORES
@@ -181,8 +195,7 @@ pub fn run(config: &Path, o: &Options<'_>) -> Result<()> {
             .collect(),
         host_cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
         streams,
-    };
-    print(&report, config, o.format)
+    })
 }
 
 /// The median and p99 (ms) of one stream's frame: its perturbation, or a frame copy when off.
