@@ -163,10 +163,7 @@ pub struct Events {
 
 impl Adapter for Events {
     fn name(&self) -> String {
-        let t = match self.endpoint {
-            SmallEndpoint::Ros1(_) => "ros1:",
-            SmallEndpoint::Dds(_) => "",
-        };
+        let t = self.endpoint.prefix();
         format!("events -> {t}{}", self.topic)
     }
 

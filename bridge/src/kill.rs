@@ -100,10 +100,7 @@ pub struct KillWatch {
 
 impl Adapter for KillWatch {
     fn name(&self) -> String {
-        let t = match self.endpoint {
-            SmallEndpoint::Ros1(_) => "ros1:",
-            SmallEndpoint::Dds(_) => "",
-        };
+        let t = self.endpoint.prefix();
         format!("kill switch <- {t}{}", self.topic)
     }
 

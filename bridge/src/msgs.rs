@@ -185,6 +185,14 @@ pub const ANY: MsgType = MsgType {
 };
 
 impl SmallEndpoint {
+    /// How adapter names mark the transport: `ros1:` before a ROS 1 topic, nothing for ROS 2.
+    pub fn prefix(&self) -> &'static str {
+        match self {
+            SmallEndpoint::Ros1(_) => "ros1:",
+            SmallEndpoint::Dds(_) => "",
+        }
+    }
+
     /// A writer of `ty` on `topic`.
     pub fn writer(&self, topic: &str, ty: SmallType, qos: Qos) -> Result<Box<dyn SmallWriter>> {
         Ok(match self {

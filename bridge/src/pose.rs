@@ -84,10 +84,7 @@ impl PoseFeed {
 
 impl Adapter for PoseFeed {
     fn name(&self) -> String {
-        let t = match self.endpoint {
-            SmallEndpoint::Ros1(_) => "ros1:",
-            SmallEndpoint::Dds(_) => "",
-        };
+        let t = self.endpoint.prefix();
         format!("pose <- {t}{} -> perturbd", self.topic)
     }
 
