@@ -31,7 +31,7 @@ try:
     from cyclonedds.domain import Domain, DomainParticipant
     from cyclonedds.topic import Topic
     from cyclonedds.pub import DataWriter
-    from cyclonedds.sub import DataReader
+    from cyclonedds.sub import DataReader, InvalidSample
     from cyclonedds.idl import IdlStruct
     import cyclonedds.idl.annotations as annotate
     import cyclonedds.idl.types as types
@@ -216,6 +216,10 @@ def listen(args):
     deadline = time.time() + args.timeout
     while got < args.count and time.time() < deadline:
         for s in reader.take(N=16):
+            # A writer that goes away (the bridge stopping) arrives as an InvalidSample: an
+            # instance-state change without data, not a message.
+            if isinstance(s, InvalidSample):
+                continue
             print(json.dumps(describe(s, args.type)), flush=True)
             got += 1
         time.sleep(0.005)
