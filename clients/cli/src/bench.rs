@@ -49,8 +49,21 @@ pub struct Args {
     lidar_hz: f64,
     /// Share of the cores the capacity model lets the streams take (the rest absorbs frame-time
     /// variance, the transport and the operating system).
-    #[arg(long, default_value_t = 0.75)]
+    #[arg(long, default_value_t = 0.65)]
     headroom: f64,
+    /// Capacity report: copies of each frame's bytes made on the host outside perturbd (the
+    /// bridge writing the sensor's frame into shared memory, the egress sending the result),
+    /// timed here and added to every frame's cost.
+    #[arg(long, default_value_t = 2)]
+    transport_copies: usize,
+    /// Capacity report: cores kept for what else runs on the host (the sensors' drivers, the
+    /// ADS), taken off every core count before the streams are fitted.
+    #[arg(long, default_value_t = 0.0)]
+    reserve_cores: f64,
+    /// Capacity report: instances of each stream's perturbation timed in turn, each with its own
+    /// buffers (the streams sharing a core evict each other's from the caches).
+    #[arg(long, default_value_t = 8)]
+    interleave: usize,
     /// Image width the input is scaled to (camera).
     #[arg(long, default_value_t = 1920)]
     width: u32,
@@ -206,6 +219,9 @@ pub fn run(a: Args) -> Result<()> {
                 lidar_hz: a.lidar_hz,
                 frames: a.frames,
                 headroom: a.headroom,
+                transport_copies: a.transport_copies,
+                reserve_cores: a.reserve_cores,
+                interleave: a.interleave,
                 image: &image,
                 cloud: &cloud,
                 format,

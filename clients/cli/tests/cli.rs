@@ -695,8 +695,14 @@ fn bench_capacity_follows_its_model_for_every_stream() {
             p50 > 0.0 && p50 <= s["cost_p99_ms"].as_f64().unwrap(),
             "{s}"
         );
+        // The transport: two copies of the frame on the host, by default.
+        let transport = s["transport_ms"].as_f64().unwrap();
+        assert!(transport > 0.0, "{s}");
         let load = s["load_cores"].as_f64().unwrap();
-        assert!((load - p50 * rate / 1000.0).abs() < 1e-12, "{s}");
+        assert!(
+            (load - (p50 + transport) * rate / 1000.0).abs() < 1e-12,
+            "{s}"
+        );
         total += load;
         for pair in s["alone"].as_array().unwrap() {
             let (n, k) = (pair[0].as_u64().unwrap(), pair[1].as_u64().unwrap());
@@ -717,5 +723,31 @@ fn bench_capacity_follows_its_model_for_every_stream() {
     let o = run(&["--headroom", "1.5"]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--headroom 1.5"));
+    // Cores kept for other work come off every count; no transport copies, no transport.
+    let o = run(&[
+        "--json",
+        "--headroom",
+        "0.5",
+        "--reserve-cores",
+        "1",
+        "--transport-copies",
+        "0",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let total = v["load_cores"].as_f64().unwrap();
+    for s in v["streams"].as_array().unwrap() {
+        assert_eq!(s["transport_ms"].as_f64(), Some(0.0), "{s}");
+    }
+    let copies = v["copies"].as_array().unwrap();
+    assert_eq!(copies[0][1].as_u64(), Some(0), "one core, one reserved");
+    assert_eq!(
+        copies[1][1].as_u64().unwrap(),
+        (0.5 / total + 1e-9).floor() as u64,
+        "two cores hold what one did"
+    );
+    let o = run(&["--reserve-cores=-1"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--reserve-cores -1"));
     let _ = std::fs::remove_dir_all(&dir);
 }
