@@ -507,9 +507,19 @@ fn the_kill_switch_returns_every_stream_to_raw_at_once_and_holds_until_armed() {
                 .all(|f| !is_raw(topic, f)),
             "{name}: a raw frame before the kill"
         );
+        // The kill holds from the first raw frame after which nothing perturbed arrives until
+        // the arm. (A frame perturbed just before the kill can still come out raw on its own
+        // deadline, `late`, and be followed by perturbed ones: that raw frame is not the kill.)
+        let last_perturbed = frames
+            .iter()
+            .filter(|f| t(f) >= t_kill && t(f) < t_arm && !is_raw(topic, f))
+            .map(t)
+            .max();
         let first_raw = frames
             .iter()
-            .find(|f| t(f) >= t_kill && is_raw(topic, f))
+            .find(|f| {
+                t(f) >= t_kill && is_raw(topic, f) && last_perturbed.is_none_or(|lp| t(f) > lp)
+            })
             .expect("a raw frame after the kill");
         eprintln!(
             "{name}: first raw frame {:.1} ms after the kill message",
