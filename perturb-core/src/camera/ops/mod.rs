@@ -12,7 +12,6 @@ mod interleave;
 mod lanes;
 mod rows;
 mod simd;
-mod transpose;
 
 pub use buffers::*;
 pub use channels::*;
@@ -35,4 +34,3 @@ pub(crate) fn dispatch_lock() -> std::sync::MutexGuard<'static, ()> {
     static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
     LOCK.lock().unwrap_or_else(|p| p.into_inner())
 }
-pub use transpose::*;

@@ -79,7 +79,7 @@ pub fn force_baseline(on: bool) {
 /// arithmetic, so wider instructions change only how many lanes run at once; a test compares the
 /// two paths on every camera perturbation. Calling the AVX2 copy is `unsafe`, sound because the
 /// features are checked first. (Kernels the compiler does not vectorise well from plain Rust are
-/// written with intrinsics instead: `camera/ops/transpose.rs`, `camera/pointwise/avx2.rs`.)
+/// written with intrinsics instead, as `camera/pointwise/avx2.rs`.)
 ///
 /// Meant for kernels that run per row or per band (the check is a few cached loads per call).
 /// Functions the body calls get the wider code only where they are inlined into it. Closures in
