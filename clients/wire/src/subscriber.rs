@@ -294,10 +294,16 @@ impl FrameSubscriber {
             })
     }
 
-    /// Waits up to `timeout` for a frame (blocking on the event listener, no polling).
+    /// Waits up to `timeout` for a frame (blocking on the event listener, no polling); under a
+    /// microsecond it only looks.
     pub fn wait(&self, timeout: Duration) -> WireResult<Option<Frame>> {
         if let Some(f) = self.receive()? {
             return Ok(Some(f));
+        }
+        // The listener's socket takes its timeout in microseconds, and 0 there means no timeout
+        // at all: a zero wait would block until the next event, however long.
+        if timeout < Duration::from_micros(1) {
+            return Ok(None);
         }
         match self.ports_or_err()?.1.timed_wait(|_| {}, timeout) {
             // A signal cut the wait short (SIGCONT after SIGSTOP, a profiler's SIGPROF): not a

@@ -51,6 +51,26 @@ fn image_arrives_in_place_with_header_and_hop_stamp() {
 }
 
 #[test]
+fn a_wait_under_a_microsecond_only_looks() {
+    let Pair(_clean, a, b) = pair("zerowait");
+    let qos = StreamQos::default();
+    let sub = b.subscriber("cam/raw", &qos, None).unwrap();
+    let mut publisher = a.publisher("cam/raw", &qos, Hop::Ingress, 1 << 16).unwrap();
+    assert!(publisher.wait_for_subscribers(1, Duration::from_secs(5)));
+    // Nothing published: these used to block until the next frame (the socket's 0 = forever).
+    assert!(sub.wait(Duration::ZERO).unwrap().is_none());
+    assert!(sub.wait(Duration::from_nanos(500)).unwrap().is_none());
+    let img = synthetic::street_image(64, 40, 3);
+    let h = FrameHeader::for_image_view(1, Stamp { sec: 1, nanosec: 0 }, "cam", &img.view());
+    publisher.publish_image(h.unwrap(), &img.view()).unwrap();
+    let f = sub
+        .wait(Duration::ZERO)
+        .unwrap()
+        .expect("the published frame");
+    assert_eq!(f.header().seq, 1);
+}
+
+#[test]
 fn cloud_with_padded_rows_and_wrong_version_is_refused() {
     let Pair(_clean, a, b) = pair("cloud");
     let qos = StreamQos::default();
