@@ -38,6 +38,74 @@ pub struct DaemonConfig {
     /// A campaign to run from the start (relative paths: to this file's folder); see
     /// `config/campaign.toml`.
     pub campaign: Option<PathBuf>,
+    /// How the frames of the streams without their own `threads` reach the worker threads.
+    pub dispatch: Dispatch,
+    /// `dispatch = "deadline"` only: frames processed at a time, each on its own share of the
+    /// worker threads (default: see [`DaemonConfig::slots`]).
+    pub dispatch_slots: Option<usize>,
+}
+
+/// `[daemon] dispatch`: how the frames of the streams without their own `threads` reach the
+/// worker threads (one per core).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(try_from = "String", rename_all = "lowercase")]
+pub enum Dispatch {
+    /// Every stream's frame work goes to one pool as it comes: concurrent frames share its
+    /// workers.
+    Shared,
+    /// Frames enter a gate in front of the workers and run earliest deadline first (arrival
+    /// plus the stream's `budget_ms`), `dispatch_slots` at a time, each on its own workers
+    /// (the default: fewer drops and shorter tails than `Shared`, docs/performance.md).
+    #[default]
+    Deadline,
+}
+
+/// A `[daemon] dispatch` value that is not a policy.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct UnknownDispatch(pub String);
+
+impl std::fmt::Display for UnknownDispatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "daemon.dispatch: `{}` is not a dispatch policy; use \"shared\" (every frame on one pool as it comes) or \"deadline\" (earliest deadline first)",
+            self.0
+        )
+    }
+}
+
+impl std::error::Error for UnknownDispatch {}
+
+impl TryFrom<String> for Dispatch {
+    type Error = UnknownDispatch;
+
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        match s.as_str() {
+            "shared" => Ok(Dispatch::Shared),
+            "deadline" => Ok(Dispatch::Deadline),
+            _ => Err(UnknownDispatch(s)),
+        }
+    }
+}
+
+impl Dispatch {
+    /// The configuration's name of the policy.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Dispatch::Shared => "shared",
+            Dispatch::Deadline => "deadline",
+        }
+    }
+}
+
+impl DaemonConfig {
+    /// With `dispatch = "deadline"`: the gate's slots and the worker threads of each, for
+    /// `workers` threads in all (one per core): `dispatch_slots` (default one per worker), each
+    /// with an equal share of the workers (at least one).
+    pub fn slots(&self, workers: usize) -> (usize, usize) {
+        let slots = self.dispatch_slots.unwrap_or(workers).max(1);
+        (slots, (workers / slots).max(1))
+    }
 }
 
 impl Default for DaemonConfig {
@@ -47,6 +115,8 @@ impl Default for DaemonConfig {
             stats_interval_s: 5.0,
             report: None,
             campaign: None,
+            dispatch: Dispatch::Deadline,
+            dispatch_slots: None,
         }
     }
 }
@@ -135,6 +205,19 @@ impl Config {
                 "daemon.stats_interval_s: {} is not a number of seconds >= 0",
                 d.stats_interval_s
             ));
+        }
+        if let Some(n) = d.dispatch_slots {
+            if d.dispatch != Dispatch::Deadline {
+                return Err(format!(
+                    "daemon.dispatch_slots: only with dispatch = \"deadline\" (dispatch is \"{}\")",
+                    d.dispatch.as_str()
+                ));
+            }
+            if !(1..=MAX_STREAM_THREADS).contains(&n) {
+                return Err(format!(
+                    "daemon.dispatch_slots: {n} must be between 1 and {MAX_STREAM_THREADS}"
+                ));
+            }
         }
         if let Some(p) = &self.transport.prefix
             && (p.is_empty()
@@ -252,6 +335,8 @@ mod tests {
         assert_eq!(c.streams[1].budget(), 200.0);
         assert_eq!(c.daemon.control_service, "perturb/control");
         assert_eq!(c.streams[0].threads, None);
+        assert_eq!(c.daemon.dispatch, Dispatch::Deadline);
+        assert_eq!(c.daemon.slots(2), (2, 1));
         let c = Config::parse(&format!("{GOOD}\nthreads = 4\n")).unwrap();
         assert_eq!(c.streams[1].threads, Some(4));
     }
@@ -314,6 +399,41 @@ mod tests {
         assert!(e.contains("streams[1] (lidar).up"), "{e}");
         let e = err(&GOOD.replace("seed = 7 }", "seed = 7 }\n        forward = \"+y\""));
         assert!(e.contains("streams[0] (cam).forward"), "{e}");
+    }
+
+    #[test]
+    fn dispatch_is_shared_or_deadline_and_its_slots_are_checked() {
+        let with = |d: &str| format!("[daemon]\n{d}\n{GOOD}");
+        let c = Config::parse(&with("dispatch = \"deadline\"")).unwrap();
+        assert_eq!(c.daemon.dispatch, Dispatch::Deadline);
+        assert_eq!(c.daemon.slots(2), (2, 1));
+        assert_eq!(c.daemon.slots(5), (5, 1));
+        let c = Config::parse(&with("dispatch = \"deadline\"\ndispatch_slots = 1")).unwrap();
+        assert_eq!(c.daemon.slots(4), (1, 4));
+        let c = Config::parse(&with("dispatch = \"deadline\"\ndispatch_slots = 2")).unwrap();
+        assert_eq!(c.daemon.slots(5), (2, 2));
+        assert_eq!(c.daemon.slots(1), (2, 1));
+        let c = Config::parse(&with("dispatch = \"shared\"")).unwrap();
+        assert_eq!(c.daemon.dispatch, Dispatch::Shared);
+        let e = err(&with("dispatch = \"fifo\""));
+        assert!(
+            e.contains("daemon.dispatch") && e.contains("`fifo`") && e.contains("\"deadline\""),
+            "{e}"
+        );
+        assert_eq!(
+            Dispatch::try_from("edf".to_string()),
+            Err(UnknownDispatch("edf".into()))
+        );
+        let e = err(&with("dispatch = \"deadline\"\ndispatch_slots = 0"));
+        assert!(
+            e.contains("daemon.dispatch_slots") && e.contains("between 1"),
+            "{e}"
+        );
+        let e = err(&with("dispatch = \"shared\"\ndispatch_slots = 2"));
+        assert!(
+            e.contains("daemon.dispatch_slots") && e.contains("only with"),
+            "{e}"
+        );
     }
 
     #[test]

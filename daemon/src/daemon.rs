@@ -3,11 +3,11 @@
 //! workers, write the JSON report and exit.
 
 use crate::campaign::CampaignRunner;
-use crate::config::{Config, StreamConfig};
+use crate::config::{Config, Dispatch, StreamConfig};
 use crate::perturbation::{self, Active};
 use crate::safety::KillSwitch;
 use crate::state::{self, CountersFile, RuntimeState, StatePaths};
-use crate::worker::{self, StreamRuntime};
+use crate::worker::{self, Gate, StreamRuntime};
 use perturb_core::registry::Modality;
 use perturb_wire::control::{
     ControlClient, ControlRequest, ControlResponse, ControlServer, StreamReport,
@@ -74,12 +74,19 @@ pub fn run(
     // Open every stream's services before starting any worker, so a bad stream stops the
     // daemon before it touches the others.
     let shutdown = Arc::new(AtomicBool::new(false));
+    let gate = dispatch_gate(&cfg)?;
     let mut streams = Vec::new();
     let mut ports = Vec::new();
     for s in &cfg.streams {
         let initial = initial_perturbation(s, saved.as_ref(), &paths)?;
-        let (rt, input, output) =
-            open_stream(&transport, s, &initial, counters.as_ref(), kill.clone())?;
+        let (rt, input, output) = open_stream(
+            &transport,
+            s,
+            &initial,
+            counters.as_ref(),
+            kill.clone(),
+            gate.clone(),
+        )?;
         ports.push((rt.clone(), input, output, initial));
         streams.push(rt);
     }
@@ -270,6 +277,40 @@ fn initial_perturbation(
     Ok(initial)
 }
 
+/// The deadline gate of `[daemon] dispatch = "deadline"` when a stream without its own
+/// `threads` would use it (None: every frame goes to the global pool as it comes).
+fn dispatch_gate(cfg: &Config) -> anyhow::Result<Option<Arc<Gate>>> {
+    let d = &cfg.daemon;
+    let gated = cfg.streams.iter().filter(|s| s.threads.is_none()).count();
+    if d.dispatch != Dispatch::Deadline || gated == 0 {
+        info!(
+            dispatch = d.dispatch.as_str(),
+            workers = rayon::current_num_threads(),
+            "frames dispatched to the shared pool as they come"
+        );
+        return Ok(None);
+    }
+    let (slots, threads) = d.slots(rayon::current_num_threads());
+    // The last free slot is kept for frames due within the shortest budget behind the gate.
+    let reserve_ms = cfg
+        .streams
+        .iter()
+        .filter(|s| s.threads.is_none())
+        .map(StreamConfig::budget)
+        .fold(f64::INFINITY, f64::min);
+    let gate = Gate::new(slots, threads, Duration::from_secs_f64(reserve_ms / 1e3))
+        .map_err(|e| anyhow::anyhow!("dispatch: cannot start the worker threads: {e}"))?;
+    info!(
+        dispatch = d.dispatch.as_str(),
+        slots,
+        threads_per_slot = threads,
+        streams = gated,
+        reserve_ms,
+        "frames dispatched earliest deadline first"
+    );
+    Ok(Some(Arc::new(gate)))
+}
+
 /// Opens stream `s`'s output and input services (the output first: once the input has its
 /// subscriber, what a publisher waits for, the output is ready too) and its runtime state.
 fn open_stream(
@@ -278,6 +319,7 @@ fn open_stream(
     initial: &Option<Active>,
     counters: Option<&CountersFile>,
     kill: Arc<KillSwitch>,
+    gate: Option<Arc<Gate>>,
 ) -> anyhow::Result<(Arc<StreamRuntime>, FrameSubscriber, FramePublisher)> {
     let output = transport
         .publisher(&s.output_service(), &s.qos, Hop::Keep, 1)
@@ -289,7 +331,8 @@ fn open_stream(
     let rt = Arc::new(
         StreamRuntime::new(s.clone(), initial.as_ref().map(|a| a.spec()), cell)
             .map_err(|e| anyhow::anyhow!("stream `{}` worker threads: {e}", s.name))?
-            .with_kill(kill),
+            .with_kill(kill)
+            .with_gate(gate),
     );
     info!(
         stream = s.name.as_str(),

@@ -9,10 +9,12 @@
 //! (`dropped_upstream`), so every sequence number is either published, invalid, or counted as
 //! dropped.
 
+mod gate;
 mod processor;
 mod receiver;
 mod runtime;
 
+pub use gate::{Gate, Permit};
 pub use runtime::StreamRuntime;
 
 use processor::process_loop;
@@ -76,7 +78,7 @@ mod tests {
     fn a_stream_with_threads_runs_its_frame_work_on_a_pool_of_that_size() {
         let rt = StreamRuntime::new(stream("threads = 3\n"), None, CounterCell::default()).unwrap();
         assert_eq!(rt.worker_threads(), 3);
-        let (n, name) = rt.on_workers(|| {
+        let (n, name) = rt.on_workers(0, || {
             let inner = rayon::join(|| std::thread::current().name().map(str::to_owned), || ());
             (rayon::current_num_threads(), inner.0)
         });
@@ -85,9 +87,31 @@ mod tests {
         // Without `threads` the work stays on the caller's (global) pool.
         let rt = StreamRuntime::new(stream(""), None, CounterCell::default()).unwrap();
         assert_eq!(
-            rt.on_workers(rayon::current_num_threads),
+            rt.on_workers(0, rayon::current_num_threads),
             rayon::current_num_threads()
         );
         assert_eq!(rt.worker_threads(), rayon::current_num_threads());
+    }
+
+    #[test]
+    fn with_the_deadline_gate_a_stream_runs_on_a_slot_unless_it_has_its_own_pool() {
+        let gate = Some(Arc::new(Gate::new(2, 1, Duration::ZERO).unwrap()));
+        let rt = StreamRuntime::new(stream(""), None, CounterCell::default())
+            .unwrap()
+            .with_gate(gate.clone());
+        assert_eq!(rt.worker_threads(), 1);
+        let (n, name) = rt.on_workers(0, || {
+            let inner = rayon::join(|| std::thread::current().name().map(str::to_owned), || ());
+            (rayon::current_num_threads(), inner.0)
+        });
+        assert_eq!(n, 1);
+        assert!(name.is_some_and(|n| n.starts_with('g')), "not on a slot");
+        // `threads` keeps the stream's own pool: its frames do not enter the gate.
+        let rt = StreamRuntime::new(stream("threads = 3\n"), None, CounterCell::default())
+            .unwrap()
+            .with_gate(gate);
+        assert_eq!(rt.worker_threads(), 3);
+        let name = rt.on_workers(0, || std::thread::current().name().map(str::to_owned));
+        assert!(name.is_some_and(|n| n.ends_with("-cam")));
     }
 }

@@ -149,13 +149,15 @@ fn process_one(
         Err(e) => return invalid(rt, h.seq, &e),
     }
     let t0 = monotonic_ns();
+    let budget_ns = (rt.config.budget() * 1e6) as u64;
+    let due = ingress(&h, t_rx).unwrap_or(t_rx).saturating_add(budget_ns);
     // The kill switch: raw frames from the next frame on, whatever the stream is set to run.
     let killed = rt.kill.engaged();
     let mut held = None;
     let active = if killed { &mut held } else { active };
     let loan = match want {
-        WireModality::Camera => camera(rt, publisher, &frame, &h, active, scratch),
-        WireModality::Lidar => lidar(rt, publisher, &frame, &h, active, cache),
+        WireModality::Camera => camera(rt, publisher, &frame, &h, due, active, scratch),
+        WireModality::Lidar => lidar(rt, publisher, &frame, &h, due, active, cache),
     };
     let mut loan = match loan {
         Ok(Some(l)) => l,
@@ -206,16 +208,16 @@ fn process_one(
             return;
         }
     }
-    let budget_ns = (rt.config.budget() * 1e6) as u64;
     let mut lat = rt.stats.latencies.lock().unwrap_or_else(|p| p.into_inner());
     lat.perturb.record(t1.saturating_sub(t0));
     lat.rx_to_tx.record(t_tx.saturating_sub(t_rx));
-    let total = if h.t_ingress_ns != 0 && h.t_ingress_ns <= t_rx {
-        lat.ingress_to_rx.record(t_rx - h.t_ingress_ns);
-        lat.ingress_to_tx.record(t_tx - h.t_ingress_ns);
-        t_tx - h.t_ingress_ns
-    } else {
-        t_tx.saturating_sub(t_rx)
+    let total = match ingress(&h, t_rx) {
+        Some(t_in) => {
+            lat.ingress_to_rx.record(t_rx - t_in);
+            lat.ingress_to_tx.record(t_tx - t_in);
+            t_tx - t_in
+        }
+        None => t_tx.saturating_sub(t_rx),
     };
     drop(lat);
     if total > budget_ns {
@@ -232,16 +234,24 @@ fn process_one(
     }
 }
 
+/// When a frame entered the middleware, its ingress stamp, if it has one on this host's clock
+/// (else its budget counts from its reception by the daemon, `t_rx`).
+fn ingress(h: &perturb_wire::FrameHeader, t_rx: u64) -> Option<u64> {
+    (h.t_ingress_ns != 0 && h.t_ingress_ns <= t_rx).then_some(h.t_ingress_ns)
+}
+
 type Loan = perturb_wire::FrameLoan;
 
 /// Writes the output image into a loan: perturbed (through the working view for encodings that
 /// are not working layouts, written back in the input's encoding, size and step), or copied
 /// when off (or when the perturbation fails). `Ok(None)`: the frame was invalid and counted.
+/// `due`: the frame's deadline (CLOCK_MONOTONIC ns), its turn in the deadline gate.
 fn camera(
     rt: &StreamRuntime,
     publisher: &FramePublisher,
     frame: &Frame,
     h: &perturb_wire::FrameHeader,
+    due: u64,
     active: &mut Option<Active>,
     scratch: &mut Scratch,
 ) -> Result<Option<Loan>, WireError> {
@@ -271,7 +281,7 @@ fn camera(
         Some(Active::Camera(p)) => {
             let result = {
                 let out = &mut loan.payload_mut()[..len];
-                rt.on_workers(|| p.apply_encoded(&input, out, h.seq, scratch))
+                rt.on_workers(due, || p.apply_encoded(&input, out, h.seq, scratch))
             };
             match result {
                 Ok(()) => {
@@ -290,12 +300,13 @@ fn camera(
 }
 
 /// Writes the output cloud into a loan sized for the perturbation's worst case and records the
-/// size it produced.
+/// size it produced (`due` as for [`camera`]).
 fn lidar(
     rt: &StreamRuntime,
     publisher: &FramePublisher,
     frame: &Frame,
     h: &perturb_wire::FrameHeader,
+    due: u64,
     active: &mut Option<Active>,
     cache: &mut LayoutCache,
 ) -> Result<Option<Loan>, WireError> {
@@ -313,7 +324,7 @@ fn lidar(
         let mut loan = publisher.loan(max.max(1))?;
         *loan.header_mut() = *h;
         let payload = loan.payload_mut();
-        match rt.on_workers(|| p.apply(&input, payload, h.seq, None)) {
+        match rt.on_workers(due, || p.apply(&input, payload, h.seq, None)) {
             Ok(shape) => {
                 let spec = p.spec();
                 let hd = loan.header_mut();

@@ -1,6 +1,7 @@
 //! A stream's runtime state: the perturbation it applies (set by control requests, taken up at the
-//! next frame), its worker pool and its counters.
+//! next frame), its worker pool (or the deadline gate in front of the daemon's) and its counters.
 
+use super::gate::Gate;
 use crate::config::StreamConfig;
 use crate::perturbation::Active;
 use crate::safety::KillSwitch;
@@ -44,6 +45,9 @@ pub struct StreamRuntime {
     pub(super) unsupported: Mutex<HashSet<String>>,
     /// The stream's own worker threads (`threads` in its configuration); `None`: the global pool.
     pool: Option<rayon::ThreadPool>,
+    /// The deadline gate its frames enter (`[daemon] dispatch = "deadline"`), for a stream
+    /// without a pool of its own.
+    gate: Option<Arc<Gate>>,
     /// The daemon's kill switch (shared by every stream).
     pub kill: Arc<KillSwitch>,
 }
@@ -87,8 +91,18 @@ impl StreamRuntime {
             geometry: Mutex::new(None),
             unsupported: Mutex::new(HashSet::new()),
             pool,
+            gate: None,
             kill: Arc::default(),
         })
+    }
+
+    /// The stream, its frames dispatched through `gate` (`[daemon] dispatch = "deadline"`)
+    /// unless it has its own pool (`threads`), which it keeps.
+    pub fn with_gate(mut self, gate: Option<Arc<Gate>>) -> Self {
+        if self.pool.is_none() {
+            self.gate = gate;
+        }
+        self
     }
 
     /// The stream, under the daemon's kill switch `kill`.
@@ -97,12 +111,18 @@ impl StreamRuntime {
         self
     }
 
-    /// Runs a perturbation's frame work on the stream's worker threads: its own pool when it has
-    /// one, the global pool otherwise.
-    pub(super) fn on_workers<R: Send>(&self, work: impl FnOnce() -> R + Send) -> R {
-        match &self.pool {
-            Some(pool) => pool.install(work),
-            None => work(),
+    /// Runs a perturbation's frame work, due at `deadline_ns` (CLOCK_MONOTONIC), on the
+    /// stream's worker threads: its own pool when it has one, else a slot of the deadline gate
+    /// once the frame's turn comes, else the global pool.
+    pub(super) fn on_workers<R: Send>(
+        &self,
+        deadline_ns: u64,
+        work: impl FnOnce() -> R + Send,
+    ) -> R {
+        match (&self.pool, &self.gate) {
+            (Some(pool), _) => pool.install(work),
+            (None, Some(gate)) => gate.enter(deadline_ns).run(work),
+            (None, None) => work(),
         }
     }
 
@@ -117,12 +137,13 @@ impl StreamRuntime {
         }
     }
 
-    /// Worker threads the stream's frame work runs on.
+    /// Worker threads a frame's work of this stream runs on.
     pub fn worker_threads(&self) -> usize {
-        self.pool.as_ref().map_or_else(
-            rayon::current_num_threads,
-            rayon::ThreadPool::current_num_threads,
-        )
+        match (&self.pool, &self.gate) {
+            (Some(pool), _) => pool.current_num_threads(),
+            (None, Some(gate)) => gate.threads_per_slot(),
+            (None, None) => rayon::current_num_threads(),
+        }
     }
 
     fn lock_control(&self) -> std::sync::MutexGuard<'_, ControlState> {
