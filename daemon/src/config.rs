@@ -51,12 +51,13 @@ pub struct DaemonConfig {
 #[serde(try_from = "String", rename_all = "lowercase")]
 pub enum Dispatch {
     /// Every stream's frame work goes to one pool as it comes: concurrent frames share its
-    /// workers.
+    /// workers (the default: a frame alone uses every core).
+    #[default]
     Shared,
     /// Frames enter a gate in front of the workers and run earliest deadline first (arrival
     /// plus the stream's `budget_ms`), `dispatch_slots` at a time, each on its own workers
-    /// (the default: fewer drops and shorter tails than `Shared`, docs/performance.md).
-    #[default]
+    /// (shorter tails than `Shared` with more streams than cores, docs/performance.md; a frame
+    /// alone takes its one-core time).
     Deadline,
 }
 
@@ -115,7 +116,7 @@ impl Default for DaemonConfig {
             stats_interval_s: 5.0,
             report: None,
             campaign: None,
-            dispatch: Dispatch::Deadline,
+            dispatch: Dispatch::Shared,
             dispatch_slots: None,
         }
     }
@@ -335,7 +336,7 @@ mod tests {
         assert_eq!(c.streams[1].budget(), 200.0);
         assert_eq!(c.daemon.control_service, "perturb/control");
         assert_eq!(c.streams[0].threads, None);
-        assert_eq!(c.daemon.dispatch, Dispatch::Deadline);
+        assert_eq!(c.daemon.dispatch, Dispatch::Shared);
         assert_eq!(c.daemon.slots(2), (2, 1));
         let c = Config::parse(&format!("{GOOD}\nthreads = 4\n")).unwrap();
         assert_eq!(c.streams[1].threads, Some(4));
